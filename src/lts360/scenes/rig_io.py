@@ -1,0 +1,97 @@
+"""Rig descriptions in TOML: presets shipped with the package, files written by users.
+
+A rig file has a top-level ``name`` and the tables ``[design]`` (:class:`RigDesign`),
+``[camera]``, ``[laser]`` and ``[stage]`` (component fields other than the pose, which
+:func:`build_rig` derives from the design).  Unknown tables or keys are errors.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from importlib import resources
+from pathlib import Path
+
+from lts360.scenes.rig import Camera, LaserSheet, Rig, RigDesign, RigError, Stage, build_rig
+
+__all__ = ["PRESETS", "load_rig", "rig_from_dict", "rig_to_toml"]
+
+PRESETS = ("paper",)
+
+_DERIVED = {"camera": {"R", "t_mm"}, "laser": {"origin_mm", "direction", "normal"}}
+_TABLES = {"design": RigDesign, "camera": Camera, "laser": LaserSheet, "stage": Stage}
+
+
+def _allowed(table: str) -> set[str]:
+    return {f.name for f in dataclasses.fields(_TABLES[table])} - _DERIVED.get(table, set())
+
+
+def rig_from_dict(data: dict, *, default_name: str = "custom") -> Rig:
+    """Build a rig from the parsed TOML dictionary (validated; :class:`RigError` on bad input)."""
+    unknown = set(data) - set(_TABLES) - {"name"}
+    if unknown:
+        raise RigError(f"unknown table(s) {sorted(unknown)}; allowed: name, {', '.join(_TABLES)}")
+    for table in _TABLES:
+        section = data.get(table, {})
+        if not isinstance(section, dict):
+            raise RigError(f"{table}: must be a table")
+        extra = set(section) - _allowed(table)
+        if extra:
+            raise RigError(f"{table}.{sorted(extra)[0]}: unknown key; allowed: "
+                           f"{', '.join(sorted(_allowed(table)))}")
+    try:
+        design = RigDesign(**data.get("design", {}))
+    except TypeError as exc:
+        raise RigError(f"design: {exc}") from None
+    name = data.get("name", default_name)
+    if not isinstance(name, str) or not name:
+        raise RigError("name: must be a non-empty string")
+    return build_rig(design, camera=data.get("camera"), laser=data.get("laser"),
+                     stage=data.get("stage"), name=name)
+
+
+def load_rig(source: str | Path = "paper") -> Rig:
+    """Load a preset by name (``"paper"``) or a TOML file by path."""
+    text: str
+    source_str = str(source)
+    if source_str in PRESETS:
+        text = resources.files("lts360.scenes").joinpath("presets", f"{source_str}.toml").read_text()
+        default_name = source_str
+    else:
+        path = Path(source_str)
+        if not path.is_file():
+            raise RigError(f"rig: {source_str!r} is neither a preset ({', '.join(PRESETS)}) "
+                           "nor a readable TOML file")
+        text = path.read_text()
+        default_name = path.stem
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise RigError(f"rig file {source_str}: invalid TOML ({exc})") from None
+    return rig_from_dict(data, default_name=default_name)
+
+
+def _fmt(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if hasattr(value, "tolist"):
+        value = value.tolist()
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_fmt(v) for v in value) + "]"
+    return repr(value)
+
+
+def rig_to_toml(rig: Rig) -> str:
+    """TOML text that :func:`load_rig` turns back into the same rig (design-built rigs only)."""
+    if rig.design is None:
+        raise RigError("rig: only rigs built from a design can be written as TOML")
+    lines = [f"name = {_fmt(rig.name)}", ""]
+    comps = {"design": rig.design, "camera": rig.camera, "laser": rig.laser, "stage": rig.stage}
+    for table, comp in comps.items():
+        lines.append(f"[{table}]")
+        for key in sorted(_allowed(table), key=[f.name for f in dataclasses.fields(comp)].index):
+            lines.append(f"{key} = {_fmt(getattr(comp, key))}")
+        lines.append("")
+    return "\n".join(lines)
