@@ -1,0 +1,60 @@
+"""The command line: one clear line and exit code 2 on bad input, no traceback."""
+
+import subprocess
+import sys
+
+import pytest
+import trimesh
+
+from lts360.cli import main
+
+
+def run(*args):
+    return subprocess.run([sys.executable, "-m", "lts360.cli", *args], capture_output=True, text=True)
+
+
+@pytest.mark.parametrize("args,field", [
+    (("object", "plug-gauge:d=50", "--out", "x.ply"), "diameter_mm"),
+    (("object", "plug-gauge:wobble=1", "--out", "x.ply"), "wobble"),
+    (("object", "teapot", "--out", "x.ply"), "teapot"),
+    (("rig", "no-such-rig.toml"), "no-such-rig.toml"),
+    (("rig", "--coverage", "--radius-mm", "-3"), "--radius-mm"),
+    (("rig", "--radius-mm", "abc"), "--radius-mm"),
+    (("frobnicate",), "frobnicate"),
+])
+def test_usage_errors_are_one_line_exit_2(args, field, tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "lts360.cli", *args], capture_output=True,
+                          text=True, cwd=tmp_path)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in proc.stderr
+    assert field in lines[0]
+    assert not list(tmp_path.iterdir())  # nothing half-written
+
+
+def test_help_for_every_command():
+    for cmd in ("objects", "object", "rig", "demo"):
+        proc = run(cmd, "--help")
+        assert proc.returncode == 0 and "usage: lts360" in proc.stdout
+
+
+def test_object_writes_a_watertight_mesh(tmp_path, capsys):
+    out = tmp_path / "pg.ply"
+    assert main(["object", "plug-gauge:d=19.9987,x=0.5,tilt_deg=1", "--out", str(out)]) == 0
+    mesh = trimesh.load(out)
+    assert mesh.is_watertight
+    assert "watertight=True" in capsys.readouterr().out
+
+
+def test_rig_coverage_table(capsys):
+    assert main(["rig", "paper", "--coverage", "--radius-mm", "10"]) == 0
+    out = capsys.readouterr().out
+    assert "total: 360.0° of 360°" in out
+    for view in ("direct", "left", "right"):
+        assert f"  {view} " in out
+
+
+def test_objects_lists_every_object(capsys):
+    assert main(["objects"]) == 0
+    out = capsys.readouterr().out
+    assert "plug-gauge" in out and "diameter_mm (d)" in out
