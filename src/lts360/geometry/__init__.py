@@ -12,6 +12,7 @@ from lts360.geometry.camera import (
     look_at,
     project_camera_points,
     project_points,
+    scale_intrinsics,
     undistort_normalized,
     world_to_camera,
 )
@@ -27,7 +28,7 @@ from lts360.geometry.mirror import (
 
 __all__ = [
     "backproject_pixels", "camera_center", "distort_normalized", "look_at",
-    "project_camera_points", "project_points", "undistort_normalized", "world_to_camera",
+    "project_camera_points", "project_points", "scale_intrinsics", "undistort_normalized", "world_to_camera",
     "CircleFit", "PlaneFit", "fit_circle", "fit_plane",
     "mirror_matrix", "reflect_directions", "reflect_points", "reflect_pose", "reflect_rays",
     "transform_plane",

@@ -20,6 +20,7 @@ __all__ = [
     "backproject_pixels",
     "camera_center",
     "look_at",
+    "scale_intrinsics",
 ]
 
 _ZERO_DIST = np.zeros(5)
@@ -222,3 +223,20 @@ def look_at(position_mm, target_mm, up=(0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.
     y = np.cross(z, x)
     R = np.stack([x, y, z])
     return R, -R @ c
+
+
+def scale_intrinsics(K: np.ndarray, scale: float) -> np.ndarray:
+    """Intrinsics of the same camera sampled on a grid ``scale`` times as fine.
+
+    Pixel centres stay at integers: ``f' = s f``, ``c' = (c + 0.5) s − 0.5``.
+    """
+    K = as_matrix(K, (3, 3), "K")
+    if not scale > 0:
+        raise ValueError(f"scale must be > 0, got {scale}")
+    out = K.copy()
+    out[0, 0] *= scale
+    out[0, 1] *= scale
+    out[1, 1] *= scale
+    out[0, 2] = (K[0, 2] + 0.5) * scale - 0.5
+    out[1, 2] = (K[1, 2] + 0.5) * scale - 0.5
+    return out

@@ -1,0 +1,273 @@
+"""A laser-triangulation integrator for Mitsuba 3: laser light through planar mirrors.
+
+Why a custom integrator: the laser is a delta light (a sheet from a point apex) and the mirrors
+are delta reflectors, so a path tracer can never connect laser → mirror → diffuse surface.
+Planar mirrors make the *method of images* exact: the light that reaches a surface point ``x``
+after the mirror sequence ``(a, b)`` (laser → a → b → x) comes from the virtual laser
+``T_b T_a O``, and its irradiance is that of the real laser at the unfolded point
+``x' = T_a T_b x`` (same path length, same sheet coordinates), provided the path crosses
+every mirror inside its real rectangle, on its reflecting side, unoccluded.
+
+Light paths simulated (L laser, S mirror, D any non-delta surface, E camera, A ambient):
+
+* ``L (S){0..K} D (S){0..K} E`` — laser light reaching the surface directly or through up to
+  ``K`` mirror reflections, seen directly or through up to ``K`` mirror reflections
+  (camera-side mirror bounces are traced with the mirror BSDF; default ``K = 2``: the 90°
+  corner's double reflections appear).  The surface response is Mitsuba's ``bsdf.eval``.
+* ``A D (S){0..K} E`` — ambient light (constant environment) by emitter sampling, and
+  ``A (S){0..K} E`` for camera rays that escape.
+
+Not simulated: interreflections between non-delta surfaces (laser light scattered by the
+object onto itself or onto a holder, ``L … D D … E``), glossy-to-mirror laser paths
+(``L D S D E``: laser light reflected by a shiny object via a mirror onto the object — the
+"multiple reflections" of paper §3.1 that arise from glossy surfaces), ambient light reaching
+the object through a mirror, the laser aperture seen by the camera, and subsurface scattering
+(the stripe in white PVC is slightly wider in reality).  Coherent effects (speckle) are added
+in the sensor stage, not here.
+
+Units: millimetres in the scene; the output is radiance in W m⁻² sr⁻¹ at the laser wavelength.
+The laser-only radiance is returned as the AOV ``laser`` so that speckle can multiply only
+the coherent part.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["LaserParams", "MirrorParams", "laser_params", "make_integrator"]
+
+MM2_PER_M2 = 1.0e6
+_SHADOW_EPS = 1e-4  # relative shortening of shadow segments (segments are 10–300 mm long)
+
+
+@dataclass(frozen=True)
+class MirrorParams:
+    """Plain-float description of a rectangular mirror for the integrator."""
+
+    normal: tuple[float, float, float]
+    d_mm: float
+    center_mm: tuple[float, float, float]
+    u_axis: tuple[float, float, float]
+    v_axis: tuple[float, float, float]
+    half_width_mm: float
+    half_height_mm: float
+    reflectance: float
+
+    def reflect(self, p: np.ndarray) -> np.ndarray:
+        n = np.asarray(self.normal)
+        return p - 2.0 * (p @ n - self.d_mm) * n
+
+
+@dataclass(frozen=True)
+class LaserParams:
+    """Plain-float description of the laser sheet for the integrator."""
+
+    origin_mm: tuple[float, float, float]
+    direction: tuple[float, float, float]
+    normal: tuple[float, float, float]
+    half_fan_rad: float
+    fan_profile: str
+    waist_mm: float
+    waist_distance_mm: float
+    rayleigh_range_mm: float
+    power_W: float
+
+
+def laser_params(rig, *, laser_on: bool = True) -> tuple[LaserParams, tuple[MirrorParams, ...]]:
+    """Extract the integrator's parameters from a :class:`lts360.scenes.rig.Rig`."""
+    las = rig.laser
+    lp = LaserParams(origin_mm=tuple(map(float, las.origin_mm)),
+                     direction=tuple(map(float, las.direction)),
+                     normal=tuple(map(float, las.normal)),
+                     half_fan_rad=math.radians(las.fan_angle_deg) / 2.0,
+                     fan_profile=las.fan_profile,
+                     waist_mm=las.waist_um * 1e-3,
+                     waist_distance_mm=float(las.waist_distance_mm),
+                     rayleigh_range_mm=float(las.rayleigh_range_mm),
+                     power_W=las.power_mW * 1e-3 if laser_on else 0.0)
+    mps = tuple(MirrorParams(normal=tuple(map(float, m.normal)), d_mm=m.d_mm,
+                             center_mm=tuple(map(float, m.center_mm)),
+                             u_axis=tuple(map(float, m.u_axis)), v_axis=tuple(map(float, m.v_axis)),
+                             half_width_mm=m.width_mm / 2.0, half_height_mm=m.height_mm / 2.0,
+                             reflectance=float(m.reflectance)) for m in rig.mirrors)
+    return lp, mps
+
+
+def _sequences(n_mirrors: int, max_bounces: int) -> list[tuple[int, ...]]:
+    from lts360.scenes.coverage import mirror_sequences
+
+    return mirror_sequences(tuple(range(n_mirrors)), max_bounces)
+
+
+def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, max_bounces: int = 2,
+                    ambient: bool = False):
+    """Build the integrator (the Mitsuba variant must already be set).
+
+    Parameters
+    ----------
+    laser : LaserParams
+    mirrors : tuple of MirrorParams
+        Their planes must match the mirror shapes in the scene.
+    max_bounces : int, [0, 3]
+        Longest mirror sequence on the camera side and on the laser side.
+    ambient : bool
+        Whether to sample the scene's emitters (ambient light).
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    if not 0 <= max_bounces <= 3:
+        raise ValueError(f"max_bounces must be in [0, 3], got {max_bounces}")
+    seqs = _sequences(len(mirrors), max_bounces)
+    O = np.asarray(laser.origin_mm)
+    n_l = np.asarray(laser.normal)
+    dir_l = np.asarray(laser.direction)
+    e2_l = np.cross(n_l, dir_l)
+    # Virtual lasers: light that met mirrors a then b appears to come from T_b T_a O.
+    virtual = []
+    for seq in seqs:
+        p = O.copy()
+        for k in seq:
+            p = mirrors[k].reflect(p)
+        refl = float(np.prod([mirrors[k].reflectance for k in seq])) if seq else 1.0
+        virtual.append((seq, p, refl))
+
+    def V(v):
+        return mi.Vector3f(float(v[0]), float(v[1]), float(v[2]))
+
+    def P(v):
+        return mi.Point3f(float(v[0]), float(v[1]), float(v[2]))
+
+    def reflect_point(p, m: MirrorParams):
+        n = V(m.normal)
+        return p - 2.0 * (dr.dot(p, n) - m.d_mm) * n
+
+    half_fan = laser.half_fan_rad
+    if laser.fan_profile == "flat":
+        fan_norm = 1.0 / (2.0 * half_fan)
+    else:  # Gaussian in angle, 1/e² at the fan edge
+        fan_norm = 1.0 / (half_fan * math.sqrt(math.pi / 2.0))
+    gauss_norm = math.sqrt(2.0 / math.pi)
+
+    class LaserTriangulationIntegrator(mi.SamplingIntegrator):
+        def __init__(self, props=None):
+            super().__init__(props if props is not None else mi.Properties())
+
+        def aov_names(self):
+            return ["laser"]
+
+        def to_string(self):
+            return f"LaserTriangulationIntegrator[max_bounces={max_bounces}, paths={len(seqs)}]"
+
+        def _irradiance_perp(self, xp):
+            """Irradiance (W/mm²) on a plane normal to the beam at unfolded points ``xp``."""
+            u = xp - P(laser.origin_mm)
+            h = dr.dot(u, V(laser.normal))
+            up = u - h * V(laser.normal)
+            rho = dr.norm(up)
+            phi = dr.atan2(dr.dot(up, V(e2_l)), dr.dot(up, V(dir_l)))
+            if laser.fan_profile == "flat":
+                fan = dr.select(dr.abs(phi) <= half_fan, fan_norm, 0.0)
+            else:
+                fan = fan_norm * dr.exp(-2.0 * dr.square(phi / half_fan))
+            w = laser.waist_mm * dr.sqrt(1.0 + dr.square((rho - laser.waist_distance_mm)
+                                                          / laser.rayleigh_range_mm))
+            across = gauss_norm / w * dr.exp(-2.0 * dr.square(h / w))
+            return laser.power_W * fan / dr.maximum(rho, 1e-6) * across, rho
+
+        def _visible(self, scene, si, seq, O_v, active):
+            """Shadow test of the path x → (mirrors, reversed) → laser."""
+            vis = mi.Bool(active)
+            p = mi.Point3f(si.p)
+            target = P(O_v)
+            first = True
+            for k in reversed(seq):
+                m = mirrors[k]
+                n = V(m.normal)
+                seg = target - p
+                dn = dr.dot(seg, n)
+                side = dr.dot(p, n) - m.d_mm
+                t = -side / dr.select(dn != 0, dn, 1.0)
+                vis = vis & (side > 0) & (dn < 0) & (t > 0) & (t < 1)
+                hit = p + t * seg
+                q = hit - P(m.center_mm)
+                vis = vis & (dr.abs(dr.dot(q, V(m.u_axis))) <= m.half_width_mm) \
+                          & (dr.abs(dr.dot(q, V(m.v_axis))) <= m.half_height_mm)
+                hit_off = hit + n * 1e-4  # just in front of the mirror surface
+                if first:
+                    ray = si.spawn_ray_to(hit_off)
+                else:
+                    ray = mi.Ray3f(p, dr.normalize(hit_off - p))
+                    ray.maxt = dr.norm(hit_off - p)
+                ray.maxt = ray.maxt * (1.0 - _SHADOW_EPS)
+                vis = vis & ~scene.ray_test(ray, vis)
+                target = reflect_point(target, m)
+                p = hit_off
+                first = False
+            end = P(laser.origin_mm)
+            if first:
+                ray = si.spawn_ray_to(end)
+            else:
+                ray = mi.Ray3f(p, dr.normalize(end - p))
+                ray.maxt = dr.norm(end - p)
+            ray.maxt = ray.maxt * (1.0 - _SHADOW_EPS)
+            return vis & ~scene.ray_test(ray, vis)
+
+        def _laser(self, scene, si, bsdf, active):
+            ctx = mi.BSDFContext()
+            out = mi.Spectrum(0.0)
+            if laser.power_W == 0.0:
+                return out
+            for seq, O_v, refl in virtual:
+                # Unfolded point x' = T_first ... T_last x (apply the last mirror first).
+                xp = mi.Point3f(si.p)
+                for k in reversed(seq):
+                    xp = reflect_point(xp, mirrors[k])
+                E_perp, _ = self._irradiance_perp(xp)
+                lit = active & (E_perp > 0)
+                to_l = P(O_v) - si.p
+                wi_world = dr.normalize(to_l)
+                lit = lit & (dr.dot(wi_world, si.n) > 0)
+                lit = self._visible(scene, si, seq, O_v, lit)
+                f = bsdf.eval(ctx, si, si.to_local(wi_world), lit)
+                out += dr.select(lit, f * (E_perp * refl * MM2_PER_M2), 0.0)
+            return out
+
+        def sample(self, scene, sampler, ray, medium=None, active=True):
+            ray = mi.Ray3f(ray)
+            active = mi.Bool(active)
+            throughput = mi.Spectrum(1.0)
+            L = mi.Spectrum(0.0)
+            L_laser = mi.Spectrum(0.0)
+            ctx = mi.BSDFContext()
+            env = scene.environment() if ambient else None
+            for depth in range(max_bounces + 1):
+                si = scene.ray_intersect(ray, active)
+                valid = active & si.is_valid()
+                if env is not None:
+                    L += dr.select(active & ~si.is_valid(), throughput * env.eval(si, active), 0.0)
+                bsdf = si.bsdf(ray)
+                is_mirror = valid & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta)
+                diffuse = valid & ~is_mirror
+                lval = self._laser(scene, si, bsdf, diffuse)
+                L_laser += throughput * lval
+                L += throughput * lval
+                if ambient:
+                    ds, em_w = scene.sample_emitter_direction(si, sampler.next_2d(diffuse), True,
+                                                              diffuse)
+                    f = bsdf.eval(ctx, si, si.to_local(ds.d), diffuse)
+                    L += dr.select(diffuse & (ds.pdf > 0), throughput * f * em_w, 0.0)
+                if depth == max_bounces:
+                    break
+                bs, w = bsdf.sample(ctx, si, sampler.next_1d(is_mirror), sampler.next_2d(is_mirror),
+                                    is_mirror)
+                throughput *= dr.select(is_mirror, w, 0.0)
+                active = is_mirror & (bs.pdf > 0)
+                ray = si.spawn_ray(si.to_world(bs.wo))
+            aov = L_laser[0] if mi.is_monochromatic else mi.luminance(L_laser)
+            return L, mi.Bool(True), [aov]
+
+    return LaserTriangulationIntegrator()
