@@ -396,7 +396,8 @@ def build_rig(design: RigDesign, *, camera: dict | None = None, laser: dict | No
     design : RigDesign
     camera : dict
         Camera fields other than the pose (``width_px``, ``pixel_pitch_um``, ...);
-        ``focus_distance_mm`` defaults to ``design.camera_distance_mm``.
+        ``focus_distance_mm`` defaults to the depth of the object axis in the laser plane
+        (focus on the object; the mirror views lie farther and are defocused).
     laser : dict
         Laser fields other than origin/direction/normal (``fan_angle_deg``, ``waist_um``, ...).
     stage : dict
@@ -408,7 +409,8 @@ def build_rig(design: RigDesign, *, camera: dict | None = None, laser: dict | No
     target = np.array([0.0, design.camera_target_y_mm, 0.0])
     position = target + design.camera_distance_mm * np.array([0.0, -math.cos(a), math.sin(a)])
     R, t = look_at(position, target, up=(0.0, 0.0, 1.0))
-    camera.setdefault("focus_distance_mm", design.camera_distance_mm)
+    # Focus on the object: the depth of the nominal axis in the laser plane (the origin).
+    camera.setdefault("focus_distance_mm", float(R[2] @ (np.zeros(3) - position)))
     try:
         cam = Camera(R=R, t_mm=t, **camera)
         las = _laser(design, laser)

@@ -68,7 +68,7 @@ class RenderResult:
 
 def render_radiance(spec: SceneSpec, *, spp: int = 4, seed: int = 0, scale: float = 1.0,
                     max_bounces: int = 2, thin_lens: bool = True, laser_on: bool = True,
-                    integrator: str = "laser") -> RenderResult:
+                    integrator: str = "laser", sampler: str = "multijitter") -> RenderResult:
     """Render the expected radiance of a scene.
 
     Parameters
@@ -85,6 +85,10 @@ def render_radiance(spec: SceneSpec, *, spp: int = 4, seed: int = 0, scale: floa
     thin_lens : bool
         Depth of field from the camera's f-number and focus distance (else a pinhole).
     laser_on : bool
+    sampler : str
+        Mitsuba sampler: ``multijitter`` (default: stratified, jittered, and correlated
+        across dimensions as little as possible — far less variance than ``independent`` on
+        the narrow stripe), ``independent``, ``stratified``, ``ldsampler``.
     integrator : str
         ``laser`` (ours) or ``path`` (Mitsuba's path tracer, as a yardstick: it cannot
         render laser light that reaches the object through a mirror and has no laser at all —
@@ -105,7 +109,10 @@ def render_radiance(spec: SceneSpec, *, spp: int = 4, seed: int = 0, scale: floa
         raise ValueError(f"integrator must be 'laser' or 'path', got {integrator!r}")
     variant = require_variant()
     register()
+    if sampler not in ("multijitter", "independent", "stratified", "ldsampler"):
+        raise ValueError(f"sampler must be multijitter, independent, stratified or ldsampler, got {sampler!r}")
     sensor = camera_to_mitsuba(spec.rig.camera, spp=spp, thin_lens=thin_lens, scale=scale)
+    sensor["sampler"] = {"type": sampler, "sample_count": spp}
     scene = load_scene(spec, sensor)
     if integrator == "laser":
         lp, mps = laser_params(spec.rig, laser_on=laser_on)
