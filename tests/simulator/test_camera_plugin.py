@@ -42,9 +42,12 @@ def any_variant(request):
         name = request.param if request.param in mi.variants() else None
     if name is None:
         pytest.skip(f"no Mitsuba variant {request.param!r} in this build")
+    previous = mi.variant()
     mi.set_variant(name)
     register()
-    return name
+    yield name
+    if previous is not None:
+        mi.set_variant(previous)
 
 
 @pytest.fixture

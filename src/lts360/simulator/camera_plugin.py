@@ -330,6 +330,7 @@ def _build_class():
                     f"far_clip={self.far_clip:g}, undistort_iterations={self.undistort_iterations}, "
                     f"film={self.film().size()}]")
 
+    OpenCVCamera.__qualname__ = "OpenCVCamera"
     return OpenCVCamera
 
 
