@@ -291,8 +291,14 @@ class Rig:
     mirrors: tuple[Mirror, ...]
     stage: Stage
     design: "RigDesign | None" = None
+    sensor: object = None  # SensorModel; None → the default (the paper's camera)
 
     def __post_init__(self) -> None:
+        from lts360.scenes.sensor import SensorModel  # sensor.py imports this module
+
+        if self.sensor is None:
+            object.__setattr__(self, "sensor", SensorModel())
+        _check(isinstance(self.sensor, SensorModel), "sensor", "must be a SensorModel")
         names = [m.name for m in self.mirrors]
         _check(len(set(names)) == len(names), "mirrors", f"names must be unique, got {names}")
         cam_c = self.camera.center_mm
@@ -388,7 +394,7 @@ def _mirrors(design: RigDesign) -> tuple[Mirror, Mirror]:
 
 
 def build_rig(design: RigDesign, *, camera: dict | None = None, laser: dict | None = None,
-              stage: dict | None = None, name: str = "custom") -> Rig:
+              stage: dict | None = None, sensor: dict | None = None, name: str = "custom") -> Rig:
     """Place camera, laser and mirrors from design parameters.
 
     Parameters
@@ -402,6 +408,8 @@ def build_rig(design: RigDesign, *, camera: dict | None = None, laser: dict | No
         Laser fields other than origin/direction/normal (``fan_angle_deg``, ``waist_um``, ...).
     stage : dict
         :class:`Stage` fields.
+    sensor : dict
+        :class:`lts360.scenes.sensor.SensorModel` fields (EMVA 1288 parameters).
     """
     camera = dict(camera or {})
     laser = dict(laser or {})
@@ -417,7 +425,11 @@ def build_rig(design: RigDesign, *, camera: dict | None = None, laser: dict | No
         stg = Stage(**(stage or {}))
     except TypeError as exc:  # unknown keyword in a table
         raise RigError(str(exc).replace("__init__() ", "")) from None
-    return Rig(name=name, camera=cam, laser=las, mirrors=_mirrors(design), stage=stg, design=design)
+    from lts360.scenes.sensor import SensorModel
+
+    sens = SensorModel.from_dict(sensor or {})
+    return Rig(name=name, camera=cam, laser=las, mirrors=_mirrors(design), stage=stg, design=design,
+               sensor=sens)
 
 
 def _laser(design: RigDesign, fields: dict) -> LaserSheet:

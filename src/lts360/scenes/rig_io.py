@@ -1,8 +1,8 @@
 """Rig descriptions in TOML: presets shipped with the package, files written by users.
 
 A rig file has a top-level ``name`` and the tables ``[design]`` (:class:`RigDesign`),
-``[camera]``, ``[laser]`` and ``[stage]`` (component fields other than the pose, which
-:func:`build_rig` derives from the design).  Unknown tables or keys are errors.
+``[camera]``, ``[laser]``, ``[stage]`` (component fields other than the pose, which
+:func:`build_rig` derives from the design) and ``[sensor]`` (EMVA 1288 parameters).  Unknown tables or keys are errors.
 """
 
 from __future__ import annotations
@@ -13,13 +13,15 @@ from importlib import resources
 from pathlib import Path
 
 from lts360.scenes.rig import Camera, LaserSheet, Rig, RigDesign, RigError, Stage, build_rig
+from lts360.scenes.sensor import SensorModel
 
 __all__ = ["PRESETS", "load_rig", "rig_from_dict", "rig_to_toml"]
 
 PRESETS = ("paper",)
 
 _DERIVED = {"camera": {"R", "t_mm"}, "laser": {"origin_mm", "direction", "normal"}}
-_TABLES = {"design": RigDesign, "camera": Camera, "laser": LaserSheet, "stage": Stage}
+_TABLES = {"design": RigDesign, "camera": Camera, "laser": LaserSheet, "stage": Stage,
+           "sensor": SensorModel}
 
 
 def _allowed(table: str) -> set[str]:
@@ -47,7 +49,7 @@ def rig_from_dict(data: dict, *, default_name: str = "custom") -> Rig:
     if not isinstance(name, str) or not name:
         raise RigError("name: must be a non-empty string")
     return build_rig(design, camera=data.get("camera"), laser=data.get("laser"),
-                     stage=data.get("stage"), name=name)
+                     stage=data.get("stage"), sensor=data.get("sensor"), name=name)
 
 
 def load_rig(source: str | Path = "paper") -> Rig:
@@ -88,10 +90,13 @@ def rig_to_toml(rig: Rig) -> str:
     if rig.design is None:
         raise RigError("rig: only rigs built from a design can be written as TOML")
     lines = [f"name = {_fmt(rig.name)}", ""]
-    comps = {"design": rig.design, "camera": rig.camera, "laser": rig.laser, "stage": rig.stage}
+    comps = {"design": rig.design, "camera": rig.camera, "laser": rig.laser, "stage": rig.stage,
+             "sensor": rig.sensor}
     for table, comp in comps.items():
         lines.append(f"[{table}]")
         for key in sorted(_allowed(table), key=[f.name for f in dataclasses.fields(comp)].index):
-            lines.append(f"{key} = {_fmt(getattr(comp, key))}")
+            value = getattr(comp, key)
+            if value is not None:  # TOML has no null: an absent key means "derived"
+                lines.append(f"{key} = {_fmt(value)}")
         lines.append("")
     return "\n".join(lines)
