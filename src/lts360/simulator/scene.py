@@ -20,10 +20,10 @@ __all__ = ["AMBIENT_RADIANCE_W_M2_SR", "SceneSpec", "mirror_shape", "mesh_shape"
            "load_scene"]
 
 #: Effective in-band radiance of the ambient light (a uniform environment), W m⁻² sr⁻¹.
-#: ``dim`` is a shaded lab seen through a 660 nm band-pass (a few % of a stripe's radiance at
-#: the auto-exposed setting); ``bright`` is the lit calibration setting of paper §4.3
-#: (a white board under it is about as bright as the laser stripe).
-AMBIENT_RADIANCE_W_M2_SR = {"off": 0.0, "dim": 0.2, "bright": 5.0}
+#: ``bright``: a white surface under it (ρ ≈ 0.8) has ~0.8 W m⁻² sr⁻¹, about an office at
+#: 500 lx seen by a camera without filter (the lit calibration images of paper §4.3);
+#: ``dim``: the same room through a ~10 nm band-pass filter at 660 nm (1/50 of it).
+AMBIENT_RADIANCE_W_M2_SR = {"off": 0.0, "dim": 0.02, "bright": 1.0}
 
 
 @dataclass(frozen=True, eq=False)
