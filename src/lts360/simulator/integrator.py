@@ -40,7 +40,8 @@ import numpy as np
 __all__ = ["LaserParams", "MirrorParams", "laser_params", "make_integrator"]
 
 MM2_PER_M2 = 1.0e6
-_SHADOW_EPS = 1e-4  # relative shortening of shadow segments (segments are 10–300 mm long)
+_SHADOW_EPS = 1e-4
+_GAUSS_CUT = 16.1  # exp(-16.1) = 1e-7  # relative shortening of shadow segments (segments are 10–300 mm long)
 
 
 @dataclass(frozen=True)
@@ -175,7 +176,10 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
                 fan = fan_norm * dr.exp(-2.0 * dr.square(phi / half_fan))
             w = laser.waist_mm * dr.sqrt(1.0 + dr.square((rho - laser.waist_distance_mm)
                                                           / laser.rayleigh_range_mm))
-            across = gauss_norm / w * dr.exp(-2.0 * dr.square(h / w))
+            q = 2.0 * dr.square(h / w)
+            # Truncate the Gaussian at 1e-7 of its peak (|h| > 2.84 w): no visible light is
+            # lost and the shadow rays of the far tails are skipped.
+            across = dr.select(q < _GAUSS_CUT, gauss_norm / w * dr.exp(-q), 0.0)
             return laser.power_W * fan / dr.maximum(rho, 1e-6) * across, rho
 
         def _visible(self, scene, si, seq, O_v, active):
@@ -237,11 +241,13 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
             return out
 
         def sample(self, scene, sampler, ray, medium=None, active=True):
+            # 1. Follow the camera ray through up to K mirror reflections until it meets a
+            #    non-delta surface (escaped rays see the ambient environment).
             ray = mi.Ray3f(ray)
             active = mi.Bool(active)
             throughput = mi.Spectrum(1.0)
             L = mi.Spectrum(0.0)
-            L_laser = mi.Spectrum(0.0)
+            found = mi.Bool(False)
             ctx = mi.BSDFContext()
             env = scene.environment() if ambient else None
             for depth in range(max_bounces + 1):
@@ -251,22 +257,25 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
                     L += dr.select(active & ~si.is_valid(), throughput * env.eval(si, active), 0.0)
                 bsdf = si.bsdf(ray)
                 is_mirror = valid & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta)
-                diffuse = valid & ~is_mirror
-                lval = self._laser(scene, si, bsdf, diffuse)
-                L_laser += throughput * lval
-                L += throughput * lval
-                if ambient:
-                    ds, em_w = scene.sample_emitter_direction(si, sampler.next_2d(diffuse), True,
-                                                              diffuse)
-                    f = bsdf.eval(ctx, si, si.to_local(ds.d), diffuse)
-                    L += dr.select(diffuse & (ds.pdf > 0), throughput * f * em_w, 0.0)
+                found = found | (valid & ~is_mirror)
                 if depth == max_bounces:
                     break
                 bs, w = bsdf.sample(ctx, si, sampler.next_1d(is_mirror), sampler.next_2d(is_mirror),
                                     is_mirror)
-                throughput *= dr.select(is_mirror, w, 0.0)
+                throughput = dr.select(is_mirror, throughput * w, throughput)
+                ray = dr.select(is_mirror, si.spawn_ray(si.to_world(bs.wo)), ray)
                 active = is_mirror & (bs.pdf > 0)
-                ray = si.spawn_ray(si.to_world(bs.wo))
+            # 2. Shade once at that surface: the laser through every mirror sequence (method of
+            #    images) and the ambient light by emitter sampling.
+            si = scene.ray_intersect(ray, found)
+            found = found & si.is_valid()
+            bsdf = si.bsdf(ray)
+            L_laser = throughput * self._laser(scene, si, bsdf, found)
+            L += L_laser
+            if ambient:
+                ds, em_w = scene.sample_emitter_direction(si, sampler.next_2d(found), True, found)
+                f = bsdf.eval(ctx, si, si.to_local(ds.d), found)
+                L += dr.select(found & (ds.pdf > 0), throughput * f * em_w, 0.0)
             aov = L_laser[0] if mi.is_monochromatic else mi.luminance(L_laser)
             return L, mi.Bool(True), [aov]
 
