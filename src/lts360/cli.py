@@ -155,7 +155,12 @@ def _progress(items, desc):
 def _cmd_demo(args) -> int:
     from lts360.experiments.demo import run_demo
 
-    run_demo(Path(args.out), radius_mm=args.radius_mm)
+    if not args.radius_mm > 0:
+        raise UsageError(f"--radius-mm: must be > 0, got {args.radius_mm}")
+    render = not args.no_render
+    if render:
+        _set_variant(args.variant)
+    run_demo(Path(args.out), radius_mm=args.radius_mm, render=render)
     return 0
 
 
@@ -205,6 +210,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("demo", help="run the main job: rig, coverage, objects, figures")
     s.add_argument("--out", default="lts360-demo", help="output directory (default ./lts360-demo)")
     s.add_argument("--radius-mm", type=float, default=10.0, help="section radius for the coverage")
+    s.add_argument("--variant", default=None, help="Mitsuba variant (default llvm_ad_mono)")
+    s.add_argument("--no-render", action="store_true", help="skip the rendered frames")
     s.set_defaults(func=_cmd_demo)
     return p
 

@@ -96,7 +96,7 @@ def test_laser_off_is_dark_and_ambient_lights_the_scene(variant):
     assert off.render.radiance_W_m2_sr.max() == 0.0
     assert off.image.max() <= rig.sensor.dark_offset_dn + 1
     lit = simulate_frame(rig, obj, spp=1, seed=1, noise="none", scale=0.125, laser_on=False,
-                         ambient="bright")
+                         ambient="bright", exposure_time_s=2e-6)
     assert lit.render.laser_W_m2_sr.max() == 0.0 and lit.render.radiance_W_m2_sr.max() > 0
 
 

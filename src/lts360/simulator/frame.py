@@ -53,7 +53,7 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
                    noise: str = "none", laser_on: bool = True, ambient: str = "off",
                    scale: float = 1.0, z_mm: float = 0.0, max_bounces: int = 2,
                    thin_lens: bool = True, exposure_time_s: float | None = None,
-                   extra_meshes: tuple = ()) -> Frame:
+                   speckle_seed: int | None = None, extra_meshes: tuple = ()) -> Frame:
     """Render one frame of ``obj`` in ``rig`` at stage height ``z_mm``.
 
     Parameters
@@ -66,8 +66,13 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
         Fixed exposure; by default auto-exposure puts the brightest stripe pixels at 80 % of
         full scale, as the paper adjusts the exposure time.
     seed : int
-        Seeds the renderer's sampler, the temporal noise and the speckle.  The sensor's fixed
-        pattern (DSNU/PRNU) comes from the rig's sensor seed: the same camera in every frame.
+        Seeds the renderer's sampler, the temporal noise and (unless ``speckle_seed`` is
+        given) the speckle.  The sensor's fixed pattern (DSNU/PRNU) comes from the rig's
+        sensor seed: the same camera in every frame.
+    speckle_seed : int, optional
+        Seed of the speckle pattern alone.  Speckle is fixed by the surface micro-structure
+        under the stripe: repeated frames of a static object share it (same speckle seed),
+        a moved or replaced object gets a new one.
     """
     from lts360.simulator import sensor as sensor_mod
     from lts360.simulator.speckle import speckle_pattern
@@ -84,12 +89,16 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
     cam = rig.camera
     sens = rig.sensor
     pitch_um = cam.pixel_pitch_um / scale
+    # Lateral magnification at the focus distance: the working f-number is N (1 + m).
+    magnification = cam.focal_length_mm / (cam.focus_distance_mm - cam.focal_length_mm)
     seeds = np.random.SeedSequence([int(seed), 0x1A5E]).spawn(2)
+    if speckle_seed is not None:
+        seeds[0] = np.random.SeedSequence([int(speckle_seed), 0x5BEC])
     radiance = res.radiance_W_m2_sr.astype(np.float64)
     if noise == "realistic" and res.laser_W_m2_sr.any():
         pattern = speckle_pattern(radiance.shape, pixel_pitch_um=pitch_um,
                                   wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
-                                  rng=np.random.default_rng(seeds[0]))
+                                  magnification=magnification, rng=np.random.default_rng(seeds[0]))
         radiance = radiance + res.laser_W_m2_sr * (pattern - 1.0)
     if exposure_time_s is None:
         # The brightest stripe pixels (99.9th percentile of the laser-lit pixels, robust to a
@@ -98,13 +107,13 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
         exposure_time_s = sensor_mod.auto_exposure(
             res.radiance_W_m2_sr, sens, wavelength_nm=rig.laser.wavelength_nm,
             f_number=cam.f_number, pixel_pitch_um=pitch_um, target_fraction=0.8,
-            percentile=99.9, mask=lit if lit.any() else None)
+            percentile=99.9, mask=lit if lit.any() else None, magnification=magnification)
     electrons = sensor_mod.radiance_to_electrons_mean(
         radiance, wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
         pixel_pitch_um=pitch_um, exposure_time_s=exposure_time_s,
-        quantum_efficiency=sens.quantum_efficiency)
+        quantum_efficiency=sens.quantum_efficiency, magnification=magnification)
     image = sensor_mod.expose(electrons, sens, rng=np.random.default_rng(seeds[1]),
-                              noise=noise == "realistic")
+                              noise=noise == "realistic", exposure_time_s=exposure_time_s)
     truth = rig_truth(rig, res.K, (radiance.shape[1], radiance.shape[0]))
     truth.update({
         "object": {"spec": obj.spec, "name": obj.name, "material": obj.material.name,
@@ -115,6 +124,7 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
                    "max_bounces": max_bounces, "thin_lens": thin_lens, "laser_on": laser_on,
                    "ambient": ambient, "seconds": res.seconds},
         "sensor": {"noise": noise, "exposure_time_s": float(exposure_time_s),
+                   "speckle_seed": speckle_seed, "magnification": magnification,
                    "bit_depth": sens.bit_depth, "model": sens.to_dict()},
     })
     return Frame(image=image, render=res, exposure_time_s=float(exposure_time_s), truth=truth,

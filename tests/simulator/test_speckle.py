@@ -1,0 +1,174 @@
+"""Laser speckle: theory (integrated speckle over a square pixel) and the simulated pattern.
+
+Assumptions tested are those of :mod:`lts360.simulator.speckle`: fully developed speckle (a
+circular complex Gaussian field), a circular pupil, pixels integrating their full square,
+mean-1 multiplicative pattern.  Not modelled (not tested): partially developed speckle from
+smooth surfaces (only a phenomenological contrast scale), coherent imaging of the narrow
+stripe, defocus-dependent statistics, temporal decorrelation.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from lts360.simulator import speckle as SP
+
+# ---- tolerances (one place, each with its reason) ------------------------------------------
+#: Simulated vs theoretical contrast at the default oversampling: the Riemann sum over
+#: s × s samples per pixel biases the contrast by +1–2 % (measured, module docstring); the
+#: sampling error of the 3 × 128² estimate is < 1 %.
+CONTRAST_RTOL = 0.05
+#: Goodman's Gaussian-correlation approximation vs the exact Airy correlation: it overstates
+#: C by up to ~5 % between the limits (3.8 % at f/1.4, 4.9 % at f/2.8 for 5.3 µm, 660 nm).
+GOODMAN_RTOL = 0.06
+#: Large-speckle contrast from 4 × 512² px with ~1800 correlation cells each: ±1.2 % (1 sigma).
+LARGE_SPECKLE_RTOL = 0.05
+
+PAPER = dict(pixel_pitch_um=5.3, wavelength_nm=660.0)
+
+
+# ---- theory ------------------------------------------------------------------------------------
+def test_theory_at_paper_settings():
+    # Anchors of the exact formula (quadrature converged to ~1e-10): see the module docstring.
+    assert SP.speckle_contrast_theory(f_number=1.4, **PAPER) == pytest.approx(0.17775, abs=2e-5)
+    assert SP.speckle_contrast_theory(f_number=2.8, **PAPER) == pytest.approx(0.32804, abs=2e-5)
+    assert SP.speckle_size_um(660.0, 1.4) == pytest.approx(1.22 * 0.66 * 1.4, rel=1e-3)
+    assert SP.correlation_area_um2(660.0, 1.4) == pytest.approx(4 * (0.66 * 1.4) ** 2 / math.pi)
+
+
+def test_exact_theory_agrees_with_frequency_domain_integral():
+    """1/M = (1/(π f_c²)) ∬ sinc²(p fx) sinc²(p fy) H(|f|) df, H the incoherent OTF of the
+    circular pupil (cut-off 2 f_c): the Fourier-side form of the same integral."""
+    for N in (1.4, 2.8, 8.0):
+        fc = SP.coherent_cutoff_cyc_per_um(660.0, N)
+        p = 5.3
+        f = np.linspace(-2 * fc, 2 * fc, 1201)
+        FX, FY = np.meshgrid(f, f)
+        nu = np.minimum(np.hypot(FX, FY) / (2 * fc), 1.0)
+        H = 2 / np.pi * (np.arccos(nu) - nu * np.sqrt(1 - nu * nu))
+        integrand = np.sinc(p * FX) ** 2 * np.sinc(p * FY) ** 2 * H
+        m_inv = np.trapezoid(np.trapezoid(integrand, f, axis=1), f) / (math.pi * fc * fc)
+        # 3e-4: trapezoid rule on the OTF's (1 − ν)^{3/2} edge with 1201² nodes.
+        assert SP.speckle_cells_per_pixel(p, 660.0, N) == pytest.approx(1 / m_inv, rel=3e-4)
+
+
+def test_theory_limits_and_goodman_approximation():
+    # Pixel ≪ speckle: one cell, C → 1; pixel ≫ speckle: M → p² / A_c (from above: edges).
+    for method in ("exact", "goodman"):
+        assert SP.speckle_cells_per_pixel(0.02, 660.0, 1.4, method=method) == pytest.approx(1.0, abs=1e-3)
+        big = SP.speckle_cells_per_pixel(200.0, 660.0, 1.4, method=method)
+        assert big / (200.0 ** 2 / SP.correlation_area_um2(660.0, 1.4)) == pytest.approx(1.0, abs=0.01)
+    for N in (1.4, 2.8, 8.0, 16.0):
+        exact = SP.speckle_contrast_theory(f_number=N, **PAPER)
+        approx = SP.speckle_contrast_theory(f_number=N, method="goodman", **PAPER)
+        assert approx == pytest.approx(exact, rel=GOODMAN_RTOL)
+    # Depolarised: twice the cells; contrast_scale: proportional.
+    c = SP.speckle_contrast_theory(f_number=2.8, **PAPER)
+    assert SP.speckle_contrast_theory(f_number=2.8, polarization="depolarized", **PAPER) == \
+        pytest.approx(c / math.sqrt(2))
+    assert SP.speckle_contrast_theory(f_number=2.8, contrast_scale=0.5, **PAPER) == pytest.approx(c / 2)
+    # The working f-number: magnification m acts as N (1 + m).
+    assert SP.speckle_contrast_theory(f_number=1.4, magnification=1.0, **PAPER) == \
+        pytest.approx(SP.speckle_contrast_theory(f_number=2.8, **PAPER))
+
+
+# ---- simulated pattern ---------------------------------------------------------------------------
+def test_pattern_mean_one_and_dtype():
+    P = SP.speckle_pattern((96, 128), f_number=2.8, rng=0, **PAPER)
+    assert P.shape == (96, 128) and P.dtype == np.float32
+    assert P.mean(dtype=np.float64) == pytest.approx(1.0, abs=1e-6)
+    assert P.min() >= 0
+
+
+@pytest.mark.parametrize("f_number", [1.4, 2.8])
+def test_contrast_matches_theory_at_paper_settings(f_number):
+    theory = SP.speckle_contrast_theory(f_number=f_number, **PAPER)
+    c = np.mean([SP.speckle_pattern((128, 128), f_number=f_number, rng=k, **PAPER).std()
+                 for k in range(3)])
+    assert c == pytest.approx(theory, rel=CONTRAST_RTOL)
+
+
+def test_large_speckle_is_fully_developed():
+    # 0.5 µm pixels, f/8: speckle 6.4 µm across, M = 1.007, C_theory = 0.996.
+    kw = dict(pixel_pitch_um=0.5, wavelength_nm=660.0, f_number=8.0)
+    theory = SP.speckle_contrast_theory(**kw)
+    assert theory > 0.99
+    P = np.stack([SP.speckle_pattern((512, 512), rng=k, **kw) for k in range(4)]).astype(float)
+    assert P.std() == pytest.approx(theory, rel=LARGE_SPECKLE_RTOL)
+    # Exponential moments <I²> = 2, <I³> = 6 (gamma with M ≈ 1): 6 % / 12 % for the
+    # correlated 4 × 512² samples (~7000 cells; the third moment is heavy-tailed).
+    M = SP.speckle_cells_per_pixel(**kw)
+    assert np.mean(P ** 2) == pytest.approx(1 + 1 / M, rel=0.06)
+    assert np.mean(P ** 3) == pytest.approx((1 + 1 / M) * (1 + 2 / M), rel=0.12)
+
+
+def test_point_intensity_is_exponential():
+    """Chi-square of point samples against Exp(1): the field is circular complex Gaussian.
+
+    Samples 4 µm apart (> 1.22 λN = 3.2 µm, the first zero of the correlation; the side lobes
+    are < 2 %) are treated as independent; 20 equiprobable bins, 19 degrees of freedom,
+    rejected at p = 0.001 (fixed seeds: deterministic)."""
+    x = np.concatenate([
+        SP.speckle_intensity((512, 512), sample_pitch_um=0.5, wavelength_nm=660.0, f_number=4.0,
+                             rng=k)[::8, ::8].ravel() for k in range(4)]).astype(float)
+    n_bins = 20
+    edges = stats.expon.ppf(np.linspace(0.0, 1.0, n_bins + 1))
+    counts = np.histogram(x, edges)[0]
+    expected = x.size / n_bins
+    chi2 = float(np.sum((counts - expected) ** 2 / expected))
+    assert chi2 < stats.chi2.ppf(0.999, n_bins - 1), chi2
+    assert np.mean(x ** 2) == pytest.approx(2.0, rel=0.05)     # 16384 samples: ±1.7 %
+    assert np.mean(x ** 3) == pytest.approx(6.0, rel=0.12)     # heavy tail: ±4 %
+
+
+def test_depolarized_and_contrast_scale():
+    c1 = np.mean([SP.speckle_pattern((128, 128), f_number=2.8, rng=k, **PAPER).std()
+                  for k in range(3)])
+    c2 = np.mean([SP.speckle_pattern((128, 128), f_number=2.8, rng=k, polarization="depolarized",
+                                     **PAPER).std() for k in range(3)])
+    assert c2 / c1 == pytest.approx(1 / math.sqrt(2), rel=CONTRAST_RTOL)
+    full = SP.speckle_pattern((64, 64), f_number=2.8, rng=5, **PAPER)
+    half = SP.speckle_pattern((64, 64), f_number=2.8, rng=5, contrast_scale=0.5, **PAPER)
+    assert np.allclose(half, 1 + 0.5 * (full - 1), atol=1e-6)
+
+
+def test_determinism():
+    kw = dict(f_number=1.4, **PAPER)
+    a = SP.speckle_pattern((64, 80), rng=3, **kw)
+    assert np.array_equal(a, SP.speckle_pattern((64, 80), rng=3, **kw))
+    assert np.array_equal(a, SP.speckle_pattern((64, 80), rng=3, workers=1, **kw))
+    ss = np.random.SeedSequence(3)
+    assert np.array_equal(SP.speckle_pattern((64, 80), rng=ss, **kw),
+                          SP.speckle_pattern((64, 80), rng=ss, **kw))
+    assert not np.array_equal(a, SP.speckle_pattern((64, 80), rng=4, **kw))
+    g = np.random.default_rng(9)
+    assert not np.array_equal(SP.speckle_pattern((32, 32), rng=g, **kw),
+                              SP.speckle_pattern((32, 32), rng=g, **kw))
+    assert np.array_equal(SP.speckle_pattern((32, 32), rng=np.random.default_rng(9), **kw),
+                          SP.speckle_pattern((32, 32), rng=np.random.default_rng(9), **kw))
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(oversample=5), "oversample=5 is too small"),
+    (dict(oversample=0), "oversample must be an integer in"),
+    (dict(polarization="circular"), "polarization must be one of"),
+    (dict(contrast_scale=1.5), "contrast_scale must be in"),
+    (dict(pixel_pitch_um=-1.0), "pixel_pitch_um must be a positive"),
+])
+def test_validation(kwargs, match):
+    kw = dict(f_number=1.4, rng=0, **PAPER)
+    kw.update(kwargs)
+    with pytest.raises(ValueError, match=match):
+        SP.speckle_pattern((16, 16), **kw)
+
+
+def test_full_frame_smoke():
+    P = SP.speckle_pattern((1024, 1280), f_number=1.4, rng=0, **PAPER)
+    assert P.shape == (1024, 1280) and P.dtype == np.float32 and np.isfinite(P).all()
+    assert P.mean(dtype=np.float64) == pytest.approx(1.0, abs=1e-6)
+    assert P.std() == pytest.approx(SP.speckle_contrast_theory(f_number=1.4, **PAPER),
+                                    rel=CONTRAST_RTOL)
