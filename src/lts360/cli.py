@@ -116,7 +116,7 @@ def _cmd_render(args) -> int:
     variant = _set_variant(args.variant)
     kw = dict(spp=args.spp, seed=args.seed, noise=args.noise, laser_on=args.laser == "on",
               ambient=args.ambient, scale=args.scale, max_bounces=args.max_bounces,
-              thin_lens=not args.pinhole)
+              thin_lens=not args.pinhole, background_z_mm=args.background_z_mm)
     if args.sections == 1:
         frame = simulate_frame(rig, obj, z_mm=args.z_mm, **kw)
         write_frame(out, frame)
@@ -203,6 +203,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--max-bounces", type=int, choices=(0, 1, 2, 3), default=2,
                    help="mirror reflections followed on camera and laser paths (default 2)")
     s.add_argument("--pinhole", action="store_true", help="pinhole instead of the thin lens")
+    s.add_argument("--background-z-mm", type=float, default=None,
+                   help="add a matte black base plate at this height (default: none)")
     s.add_argument("--sections", type=int, default=1, help="render a scan of N sections")
     s.add_argument("--pitch-mm", type=float, default=0.0, help="stage pitch of a scan (mm)")
     s.set_defaults(func=_cmd_render)

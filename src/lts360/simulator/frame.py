@@ -53,7 +53,8 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
                    noise: str = "none", laser_on: bool = True, ambient: str = "off",
                    scale: float = 1.0, z_mm: float = 0.0, max_bounces: int = 2,
                    thin_lens: bool = True, exposure_time_s: float | None = None,
-                   speckle_seed: int | None = None, extra_meshes: tuple = ()) -> Frame:
+                   speckle_seed: int | None = None, background_z_mm: float | None = None,
+                   extra_meshes: tuple = ()) -> Frame:
     """Render one frame of ``obj`` in ``rig`` at stage height ``z_mm``.
 
     Parameters
@@ -83,7 +84,7 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
     mesh = obj.mesh_world()
     mesh.apply_transform(T_stage)
     meshes = (("object", mesh, material_to_bsdf(obj.material)),) + tuple(extra_meshes)
-    spec = SceneSpec(rig, meshes, ambient=ambient)
+    spec = SceneSpec(rig, meshes, ambient=ambient, background_z_mm=background_z_mm)
     res = render_radiance(spec, spp=spp, seed=seed, scale=scale, max_bounces=max_bounces,
                           thin_lens=thin_lens, laser_on=laser_on)
     cam = rig.camera
@@ -122,7 +123,8 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
         "stage": {"z_mm": float(z_mm), "axis": [0.0, 0.0, 1.0]},
         "render": {"variant": res.variant, "spp": res.spp, "seed": res.seed, "scale": scale,
                    "max_bounces": max_bounces, "thin_lens": thin_lens, "laser_on": laser_on,
-                   "ambient": ambient, "seconds": res.seconds},
+                   "ambient": ambient, "background_z_mm": background_z_mm,
+                   "seconds": res.seconds},
         "sensor": {"noise": noise, "exposure_time_s": float(exposure_time_s),
                    "speckle_seed": speckle_seed, "magnification": magnification,
                    "bit_depth": sens.bit_depth, "model": sens.to_dict()},

@@ -37,11 +37,15 @@ class SceneSpec:
         Shapes in world millimetres (the object under test, a calibration board, ...).
     ambient : str
         ``off``, ``dim`` or ``bright``.
+    background_z_mm : float, optional
+        Height of a matte black base plate (ρ = 0.04, 400 × 400 mm, facing +Z) that the
+        object stands on, like the stage's table; ``None``: no background (black void).
     """
 
     rig: Rig
     meshes: tuple
     ambient: str = "off"
+    background_z_mm: float | None = None
 
     def __post_init__(self) -> None:
         if self.ambient not in AMBIENT_RADIANCE_W_M2_SR:
@@ -80,6 +84,13 @@ def scene_dict(spec: SceneSpec, sensor: dict, directory: str) -> dict:
         d[f"mirror_{m.name}"] = mirror_shape(m)
     for name, mesh, bsdf in spec.meshes:
         d[name] = mesh_shape(mesh, bsdf, directory, name)
+    if spec.background_z_mm is not None:
+        import mitsuba as mi
+
+        d["background"] = {"type": "rectangle",
+                           "to_world": mi.ScalarTransform4f().translate([0.0, 0.0, float(spec.background_z_mm)])
+                           @ mi.ScalarTransform4f().scale([200.0, 200.0, 1.0]),
+                           "bsdf": {"type": "diffuse", "reflectance": {"type": "spectrum", "value": 0.04}}}
     radiance = AMBIENT_RADIANCE_W_M2_SR[spec.ambient]
     if radiance > 0:
         d["ambient"] = {"type": "constant", "radiance": {"type": "spectrum", "value": radiance}}
