@@ -6,11 +6,12 @@ a tube of radius ``ρ`` around the helix ``H_k(t) = (R cos(t + β_k), R sin(t + 
 with ``c = ±λ / 2π`` (lay length ``λ``, + for a right-hand lay) and ``β_k = β_0 + 2πk/N``.
 Inner layers and the voids between wires are filled (invisible).
 
-Wire size.  The outer wires touch their neighbours in a plane section across straight wires
-(``ρ = R sin(π / N)``) and reach the overall diameter (``R + ρ = d / 2``), so
+Wire size.  The outer wires would just touch their neighbours if they were straight
+(``ρ = R sin(π / N)``) and they reach the overall diameter (``R + ρ = d / 2``), so
 ``ρ = (d/2) s / (1 + s)`` with ``s = sin(π / N)``.  For 7 wires this is the equal-wire
-conductor, ``2ρ = d / 3``; for 19 and 37 wires the outer wires come out 2.7 % and 3.6 % thicker
-than ``d / (2n − 1)``, which closes the outer layer (as in a compacted conductor).  Because
+conductor, ``2ρ = d / 3``; for 19 and 37 wires the outer wires come out 2.8 % and 3.6 %
+thicker than ``d / (2n − 1)``, which closes the outer layer (as in a compacted conductor;
+with equal wires the outer layer of a 19- or 37-wire conductor has gaps).  Because
 the oblique cut of a helical wire is ``1 / cos α`` wider than the wire (lay angle ``α``),
 neighbours then overlap slightly in every section ``z = const`` and the envelope is
 continuous, with a cusp half-way between wires.
@@ -18,21 +19,23 @@ continuous, with a cusp half-way between wires.
 Truth.  The visible surface is the outer envelope: ``r(θ, z)`` is the largest ``r`` such that
 ``(r cos θ, r sin θ, z)`` lies within ``ρ`` of some helix.  It is helically invariant,
 ``r = f(θ − τ z − β_0)`` with ``τ = 1 / c = ±2π / λ``, and ``f`` is even and
-``2π/N``-periodic.  The squared distance from a point at angle ``φ`` on ``z = 0`` to ``H_0`` is
-``r² + R² − 2 r R cos(t − φ) + c² t²``, convex in ``t`` since ``c² > r R`` (any lay ratio ≥ 4), so
-its boundary points are exactly ``P = H_0(t) + ρ (cos ω e_r + sin ω b)`` (``e_r`` radial,
+``2π/N``-periodic (the same ``f`` for both lay directions).  The squared distance from the
+point ``(r, φ, 0)`` to ``H_0(t)`` (``β_0 = 0``) is ``r² + R² − 2 r R cos(t − φ) + c² t²``,
+convex in ``t`` since ``c² > r R`` (true for any lay ratio ≥ 4), so the section's boundary
+points are exactly ``P = H_0(t) + ρ (cos ω e_r + sin ω b)`` (``e_r`` radial,
 ``b`` binormal) with ``P_z = 0``, i.e. ``t = −ρ R sin ω / (c L)``, ``L = sqrt(R² + c²)``::
 
     f = sqrt((R + ρ cos ω)² + (c ρ sin ω / L)²),
     φ = Θ(ω) = ρ R sin ω / (c L) + atan2(c ρ sin ω / L, R + ρ cos ω)     (c > 0)
 
-on the outer branch ``0 ≤ ω ≤ ω_cusp`` (``Θ(ω_cusp) = π / N``).  ``Θ(ω) = |φ|`` has no closed
-form; it is solved by safeguarded Newton iterations to machine precision.
+on the outer branch ``0 ≤ ω ≤ ω_cusp`` (``Θ(ω_cusp) = π / N``).  ``Θ(ω) = |φ|`` has no
+closed form; it is solved by safeguarded Newton iterations to machine precision.
 """
 
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -103,14 +106,17 @@ class StrandSection:
         """Solve for the grazing and cusp angles; ``ValueError`` if neighbours do not overlap."""
         R, rho, c = helix_radius_mm, wire_radius_mm, c_mm_per_rad
         probe = StrandSection(R, rho, c, n_wires, math.pi, math.pi)
-        d_theta = lambda w: float(probe.theta_derivative(np.float64(w)))  # noqa: E731
+
+        def d_theta(w):
+            return float(probe.theta_derivative(w))
+
+        # Θ' > 0 at ω = π/2 and Θ' < 0 at ω = π: the grazing ray is in between.
         w_tan = brentq(d_theta, math.pi / 2.0, math.pi, xtol=1e-15)
-        gap = float(probe.theta(np.float64(w_tan))) - math.pi / n_wires
-        if not gap > 0.0:
+        if not float(probe.theta(w_tan)) > math.pi / n_wires:
             raise ValueError(f"{NAME}: neighbouring outer wires do not overlap (lay too long for "
                              f"the wire size)")
-        w_cusp = brentq(lambda w: float(probe.theta(np.float64(w))) - math.pi / n_wires,
-                        0.0, w_tan, xtol=1e-15)
+        w_cusp = brentq(lambda w: float(probe.theta(w)) - math.pi / n_wires, 0.0, w_tan,
+                        xtol=1e-15)
         return StrandSection(R, rho, c, n_wires, w_tan, w_cusp)
 
     def _ab(self):
@@ -140,7 +146,7 @@ class StrandSection:
         return np.hypot(R + rho * np.cos(w), b * np.sin(w))
 
     def omega_of(self, phi_abs_rad):
-        """``ω ∈ [0, ω_cusp]`` with ``Θ(ω) = φ`` for ``φ ∈ [0, π/N]`` (Newton, bracketed)."""
+        """``ω ∈ [0, ω_cusp]`` with ``Θ(ω) = φ`` for ``φ ∈ [0, π/N]`` (bracketed Newton)."""
         target = np.asarray(phi_abs_rad, dtype=float)
         table_w = np.linspace(0.0, self.omega_cusp_rad, 513)
         w = np.interp(target, self.theta(table_w), table_w)
@@ -207,9 +213,11 @@ class CableParams:
 
     def __post_init__(self) -> None:
         if self.preset not in SCANS:
-            raise ValueError(f"{NAME}: preset must be one of {', '.join(SCANS)}, got {self.preset!r}")
+            raise ValueError(f"{NAME}: preset must be one of {', '.join(SCANS)}, got "
+                             f"{self.preset!r}")
         check_range(self.preset, "diameter_mm", self.diameter_mm, 3.0, 30.0)
-        if isinstance(self.strands, bool) or self.strands not in LAYERS:
+        if (isinstance(self.strands, bool) or not isinstance(self.strands, numbers.Integral)
+                or self.strands not in LAYERS):
             raise ValueError(f"{self.preset}: strands must be one of 7, 19, 37 (1+6, 1+6+12, "
                              f"1+6+12+18), got {self.strands!r}")
         check_range(self.preset, "lay_ratio", self.lay_ratio, 10.0, 16.0)

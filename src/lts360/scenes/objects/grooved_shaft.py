@@ -15,8 +15,8 @@ The mesh uses the twisted grid of :func:`~lts360.scenes.objects.mesher.star_mesh
 of constant ``ψ = φ`` are helices of constant radius, the groove edges lie on two of them).
 This module also holds the two helpers shared with the stranded cable
 (:mod:`lts360.scenes.objects.cable`): :func:`helical_resolution` (grid nodes and axial step
-from the curvature of a profile) and :func:`helical_star_mesh` (a twisted star mesh whose quad diagonals always run
-along the short diagonal of the twisted grid).
+from the curvature of a profile) and :func:`helical_star_mesh` (a twisted star mesh whose
+quads are always split along the short diagonal of the twisted grid).
 """
 
 from __future__ import annotations
@@ -76,8 +76,8 @@ def helical_resolution(pieces, twist_rad_per_mm: float, budget_mm: float):
 
     The mesh is built by :func:`helical_star_mesh`: its triangles have a *section edge*
     (``Δφ``, same ``z``), a *helix edge* (same ``φ``, ``Δz``) and a *diagonal*
-    ``(−Δφ, Δz)`` (sign for ``τ > 0``; the short diagonal, spanning ``Δθ = τ Δz − Δφ``).  To
-    second order the radial error at the middle of an edge ``(a, b)`` in ``(φ, z)`` is::
+    ``(−Δφ, Δz)`` (sign for ``τ > 0``; the short diagonal, spanning ``Δθ = τ Δz − Δφ``).
+    To second order the radial error at the middle of an edge ``(a, b)`` in ``(φ, z)`` is::
 
         m(a, b) = [E a² + 2 c τ a b + f τ² b²] / 8,
         E = f + 2 f'² / f − f'',   c = f + f'² / f
@@ -85,9 +85,10 @@ def helical_resolution(pieces, twist_rad_per_mm: float, budget_mm: float):
     (the chord of a curve ``X(s)`` lies ``X'' / 8`` off it; the radial error is that offset
     projected on ``∇(r − f(θ − τ z))``).  The rules, with ``B = budget_mm``:
 
-    * section edges: nodes equidistribute ``sqrt(|E| / (8 · B/2))`` over each smooth piece,
-      then any interval where ``|E| Δφ² / 8`` exceeds ``B/2`` at some sample is split evenly,
-      so ``|m| ≤ B/2`` (the local ``|E|`` is the largest over five neighbouring samples);
+    * section edges: nodes equidistribute ``sqrt(|E| / (8 · B/2))`` over each smooth
+      piece, then any interval where ``|E| Δφ² / 8`` exceeds ``B/2`` at some sample is split
+      evenly, so ``|m| ≤ B/2`` (the local ``|E|`` is the largest of five neighbouring
+      samples);
     * helix edges: ``f_max τ² Δz² / 8 ≤ B/2`` (exactly: ``f (1 − cos(τ Δz / 2)) ≤ B/2``);
     * diagonals: ``Δz`` is cut at the first ``Δz`` where ``|m| = B`` for some sample of some
       interval.  Where the profile is steep (``|f'| ≫ f``) the cross term ``2 c τ Δφ Δz``
@@ -130,7 +131,8 @@ def helical_resolution(pieces, twist_rad_per_mm: float, budget_mm: float):
         e_abs = maximum_filter1d(np.abs(e_signed), size=5, mode="nearest")
         phi_s = np.gradient(phi, s, edge_order=2)
         density = np.sqrt(e_abs / (8.0 * half)) * phi_s  # section edges per unit of s
-        cum = np.concatenate([[0.0], np.cumsum((density[1:] + density[:-1]) / 2.0 * np.diff(s))])
+        steps = (density[1:] + density[:-1]) / 2.0 * np.diff(s)
+        cum = np.concatenate([[0.0], np.cumsum(steps)])
         n = max(1, math.ceil(cum[-1] - 1e-9))
         phi_nodes = np.interp(np.interp(np.linspace(0.0, cum[-1], n + 1), cum, s), s, phi)
         phi_nodes[0], phi_nodes[-1] = phi[0], phi[-1]
@@ -240,7 +242,8 @@ class GroovedShaftParams:
         check_range(NAME, "groove_width_mm", self.groove_width_mm, 0.2, 5.0)
         check_less(NAME, "groove_width_mm", self.groove_width_mm, "groove_lead_mm",
                    self.groove_lead_mm)
-        check_range(NAME, "groove_depth_mm", self.groove_depth_mm, 0.02, 0.4 * self.groove_width_mm)
+        check_range(NAME, "groove_depth_mm", self.groove_depth_mm, 0.02,
+                    0.4 * self.groove_width_mm)
         if self.handedness not in _HANDEDNESS:
             raise ValueError(f"{NAME}: handedness must be one of {', '.join(_HANDEDNESS)}, "
                              f"got {self.handedness!r}")
@@ -327,7 +330,7 @@ class GroovedShaftParams:
                                             - self.groove_half_angle_rad,
                                             math.radians(self.groove_phase_deg)
                                             + self.groove_half_angle_rad),
-                   "helix_angle_deg": math.degrees(math.atan2(self.groove_lead_mm,
+                   "lead_angle_deg": math.degrees(math.atan2(self.groove_lead_mm,
                                                               math.pi * self.diameter_mm))})
 
 
