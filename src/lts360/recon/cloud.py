@@ -1,0 +1,125 @@
+"""Measured point clouds organised by (θ, section), with view labels and quality flags.
+
+Written as binary little-endian PLY with per-vertex attributes, readable by trimesh, Open3D and
+any PLY reader: ``x y z`` (measurement frame, mm; ``z`` is the stage position of the
+section), ``theta`` (rad), ``radius`` (mm), ``view`` (uchar, see :data:`VIEW_CODES`),
+``quality`` (uchar, see :class:`lts360.recon.peaks.Quality` — 0 is a valid point),
+``section`` (int), ``intensity`` (float, peak grey value).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["VIEW_CODES", "VIEW_NAMES", "Cloud", "write_cloud", "read_cloud"]
+
+VIEW_CODES = {"direct": 0, "left": 1, "right": 2, "left-right": 3, "right-left": 4, "fused": 9}
+VIEW_NAMES = {v: k for k, v in VIEW_CODES.items()}
+
+_FIELDS = (("x", "<f8", "double"), ("y", "<f8", "double"), ("z", "<f8", "double"),
+           ("theta", "<f8", "double"), ("radius", "<f8", "double"), ("view", "u1", "uchar"),
+           ("quality", "u1", "uchar"), ("section", "<i4", "int"), ("intensity", "<f4", "float"))
+
+
+@dataclass(frozen=True, eq=False)
+class Cloud:
+    """A measured point cloud (one row per point).
+
+    Attributes
+    ----------
+    points_mm : (n, 3) float
+        Measurement frame; ``z`` is the section's stage position.
+    theta_rad, radius_mm : (n,) float
+    view : (n,) uint8
+        :data:`VIEW_CODES`.
+    quality : (n,) uint8
+        0 = found; other codes keep the reason a θ gave no valid point (then the point is NaN).
+    section : (n,) int32
+    intensity : (n,) float32
+    """
+
+    points_mm: np.ndarray
+    theta_rad: np.ndarray
+    radius_mm: np.ndarray
+    view: np.ndarray
+    quality: np.ndarray
+    section: np.ndarray
+    intensity: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = len(self.points_mm)
+        if np.asarray(self.points_mm).shape != (n, 3):
+            raise ValueError(f"points_mm must have shape (n, 3), got {np.asarray(self.points_mm).shape}")
+        for name in ("theta_rad", "radius_mm", "view", "quality", "section", "intensity"):
+            if len(getattr(self, name)) != n:
+                raise ValueError(f"{name} must have {n} entries, got {len(getattr(self, name))}")
+
+    def __len__(self) -> int:
+        return len(self.points_mm)
+
+    @property
+    def valid(self) -> np.ndarray:
+        return (self.quality == 0) & np.all(np.isfinite(self.points_mm), axis=1)
+
+    def select(self, mask: np.ndarray) -> "Cloud":
+        return Cloud(*(np.asarray(getattr(self, f))[mask] for f in
+                       ("points_mm", "theta_rad", "radius_mm", "view", "quality", "section",
+                        "intensity")))
+
+    @staticmethod
+    def concatenate(clouds: list["Cloud"]) -> "Cloud":
+        names = ("points_mm", "theta_rad", "radius_mm", "view", "quality", "section", "intensity")
+        if not clouds:
+            return Cloud(np.zeros((0, 3)), *(np.zeros(0, dtype=d) for d in
+                                             (float, float, np.uint8, np.uint8, np.int32, np.float32)))
+        return Cloud(*(np.concatenate([getattr(c, n) for c in clouds]) for n in names))
+
+
+def write_cloud(path, cloud: Cloud) -> Path:
+    """Binary PLY with the attributes above (written to a temporary name, then renamed)."""
+    path = Path(path)
+    n = len(cloud)
+    rec = np.empty(n, dtype=[(name, dt) for name, dt, _ in _FIELDS])
+    rec["x"], rec["y"], rec["z"] = (cloud.points_mm[:, k] for k in range(3))
+    rec["theta"], rec["radius"] = cloud.theta_rad, cloud.radius_mm
+    rec["view"], rec["quality"] = cloud.view, cloud.quality
+    rec["section"], rec["intensity"] = cloud.section, cloud.intensity
+    header = ["ply", "format binary_little_endian 1.0", "comment lts360 measured cloud, mm",
+              f"element vertex {n}"] + [f"property {ply} {name}" for name, _, ply in _FIELDS]
+    header.append("end_header")
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "wb") as f:
+        f.write(("\n".join(header) + "\n").encode("ascii"))
+        f.write(rec.tobytes())
+    os.replace(tmp, path)
+    return path
+
+
+def read_cloud(path) -> Cloud:
+    """Read a cloud written by :func:`write_cloud`; ``ValueError`` names what is wrong."""
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"cloud {str(path)!r}: no such file")
+    with open(path, "rb") as f:
+        data = f.read()
+    end = data.find(b"end_header\n")
+    if not data.startswith(b"ply\n") or end < 0:
+        raise ValueError(f"cloud {path}: not a PLY file")
+    header = data[:end].decode("ascii", errors="replace").splitlines()
+    if "format binary_little_endian 1.0" not in header:
+        raise ValueError(f"cloud {path}: expected binary_little_endian PLY")
+    n = next((int(line.split()[2]) for line in header if line.startswith("element vertex")), None)
+    props = [line.split()[2] for line in header if line.startswith("property")]
+    if n is None or props != [name for name, _, _ in _FIELDS]:
+        raise ValueError(f"cloud {path}: vertex properties must be {[f[0] for f in _FIELDS]}, "
+                         f"got {props}")
+    dt = np.dtype([(name, d) for name, d, _ in _FIELDS])
+    rec = np.frombuffer(data, dtype=dt, count=n, offset=end + len(b"end_header\n"))
+    pts = np.column_stack([rec["x"], rec["y"], rec["z"]]).astype(float)
+    return Cloud(pts, rec["theta"].astype(float), rec["radius"].astype(float),
+                 rec["view"].copy(), rec["quality"].copy(), rec["section"].astype(np.int32),
+                 rec["intensity"].astype(np.float32))
