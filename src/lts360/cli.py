@@ -152,6 +152,35 @@ def _progress(items, desc):
     return tqdm(items, desc=desc, unit="frame")
 
 
+def _cmd_score(args) -> int:
+    import json
+
+    from lts360.experiments.score import load_truth, score_cloud
+    from lts360.recon.cloud import read_cloud
+    from lts360.simulator.io import write_json
+
+    cloud = read_cloud(args.cloud)
+    obj, _ = load_truth(args.truth)
+    metrics = score_cloud(cloud, obj)
+    out = Path(args.out)
+    if not out.parent.exists():
+        raise UsageError(f"--out: directory {str(out.parent)!r} does not exist")
+    write_json(out, metrics)
+    fmt = lambda v: "—" if v is None else f"{v * 1000:.2f} µm"  # noqa: E731
+    print(f"{obj.name}: {metrics['n_points']} points, coverage {metrics['coverage_deg']:.1f}°, "
+          f"truth {metrics['truth']}")
+    print(f"  rms {fmt(metrics['rms_mm'])}, mean {fmt(metrics['mean_mm'])}, "
+          f"max |e| {fmt(metrics['max_abs_mm'])}, p95 {fmt(metrics['p95_mm'])}")
+    for view, row in metrics["views"].items():
+        print(f"  {view:10s} n={row['n']:6d} rms {fmt(row['rms_mm'])} mean {fmt(row['mean_mm'])} "
+              f"coverage {row['coverage_deg']:.1f}°")
+    if "radius_bias_mm" in metrics:
+        print(f"  fitted diameter {metrics['fitted_diameter_mm']:.5f} mm, radius bias "
+              f"{fmt(metrics['radius_bias_mm'])}")
+    print(f"wrote {out}")
+    return 0
+
+
 def _cmd_demo(args) -> int:
     from lts360.experiments.demo import run_demo
 
@@ -208,6 +237,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--sections", type=int, default=1, help="render a scan of N sections")
     s.add_argument("--pitch-mm", type=float, default=0.0, help="stage pitch of a scan (mm)")
     s.set_defaults(func=_cmd_render)
+
+    s = sub.add_parser("score", help="score a measured cloud against the truth of rendered frames")
+    s.add_argument("cloud", help="cloud.ply written by `lts360 measure`")
+    s.add_argument("--truth", required=True, help="frame or scan directory written by `lts360 render`")
+    s.add_argument("--out", required=True, help="metrics.json")
+    s.set_defaults(func=_cmd_score)
 
     s = sub.add_parser("demo", help="run the main job: rig, coverage, objects, figures")
     s.add_argument("--out", default="lts360-demo", help="output directory (default ./lts360-demo)")
