@@ -71,7 +71,7 @@ def test_rigid_design_changes_move_components():
     ("design", "mirror_corner_distance_mm", 20.0, r"design.mirror_corner_distance_mm: mirrors pass"),
     ("camera", "f_number", 0.1, r"camera.f_number: must be in"),
     ("camera", "width_px", 12.5, r"camera.width_px: must be an integer"),
-    ("laser", "rayleigh_range_mm", 200.0, r"laser.rayleigh_range_mm: .*M² < 1"),
+    ("laser", "rayleigh_range_mm", 2000.0, r"laser.rayleigh_range_mm: .*M² < 1"),
     ("laser", "fan_profile", "square", r"laser.fan_profile"),
     ("laser", "colour", 1, r"laser.colour: unknown key"),
     ("stage", "pitch_mm", -1.0, r"stage.pitch_mm"),
