@@ -51,8 +51,8 @@ def _render(spec, **kw):
 def _view_T(rig, view):
     T = np.eye(4)
     if view != "direct":
-        for name in view.split("-"):
-            T = T @ rig.mirror(name).T
+        for name in view.split("-"):  # object → first → second → camera
+            T = rig.mirror(name).T @ T
     return T
 
 

@@ -353,7 +353,8 @@ def calibration_from_dict(data: Mapping) -> Calibration:
         mirrors.append(MirrorPlane(name=_require(m, "name", where), n=_require(m, "normal", where),
                                    d_mm=_require(m, "d_mm", where), corners_mm=corners))
     laser = _require(data, "laser_plane")
-    laser_plane = (_require(laser, "normal", "laser_plane."), _require(laser, "d_mm", "laser_plane."))
+    laser_plane = (_require(laser, "normal", "laser_plane."),
+                   _require(laser, "d_mm", "laser_plane."))
     T = _opencv_matrix(_require(data, "T_cam_meas"), "T_cam_meas")
     offsets = data.get("view_offsets_mm") or {}
     uncertainty = data.get("uncertainty") or {}
@@ -431,12 +432,24 @@ def load_calibration(path) -> Calibration:
     return calibration_from_dict(data)
 
 
+def _jsonable(value):
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (np.floating, np.integer, np.bool_)):
+        return value.item()
+    raise TypeError(f"uncertainty: {type(value).__name__} is not JSON serialisable")
+
+
 def save_calibration(path, cal: Calibration) -> None:
-    """Write ``cal`` as JSON atomically (temporary file in the same folder, then rename)."""
+    """Write ``cal`` as JSON atomically (temporary file in the same folder, then rename).
+
+    The text is built before anything is written, so a value that cannot be serialised (in
+    ``uncertainty``) raises ``TypeError`` and leaves any existing file untouched.
+    """
     if not isinstance(cal, Calibration):
         raise ValueError(f"cal: must be a Calibration, got {type(cal).__name__}")
     path = Path(path)
-    text = json.dumps(calibration_to_dict(cal), indent=2)
+    text = json.dumps(calibration_to_dict(cal), indent=2, default=_jsonable)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "w") as f:

@@ -3,7 +3,8 @@
 Written as binary little-endian PLY with per-vertex attributes, readable by trimesh, Open3D and
 any PLY reader: ``x y z`` (measurement frame, mm; ``z`` is the stage position of the
 section), ``theta`` (rad), ``radius`` (mm), ``view`` (uchar, see :data:`VIEW_CODES`),
-``quality`` (uchar, see :class:`lts360.recon.peaks.Quality` — 0 is a valid point),
+``quality`` (uchar, :class:`lts360.recon.peaks.Quality`; points that gave no valid
+measurement are NaN and keep the reason here),
 ``section`` (int), ``intensity`` (float, peak grey value).
 """
 
@@ -37,7 +38,8 @@ class Cloud:
     view : (n,) uint8
         :data:`VIEW_CODES`.
     quality : (n,) uint8
-        0 = found; other codes keep the reason a θ gave no valid point (then the point is NaN).
+        :class:`lts360.recon.peaks.Quality` of the θ: a valid point (finite) is FOUND (0) or
+        SATURATED (2); an invalid one (NaN) keeps the reason it gave no point.
     section : (n,) int32
     intensity : (n,) float32
     """
@@ -63,7 +65,7 @@ class Cloud:
 
     @property
     def valid(self) -> np.ndarray:
-        return (self.quality == 0) & np.all(np.isfinite(self.points_mm), axis=1)
+        return np.all(np.isfinite(self.points_mm), axis=1)
 
     def select(self, mask: np.ndarray) -> "Cloud":
         return Cloud(*(np.asarray(getattr(self, f))[mask] for f in

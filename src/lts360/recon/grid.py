@@ -92,7 +92,8 @@ class CylGrid:
                              f"{theta_range_deg}")
         steps = span / theta_step_deg
         if abs(span - 360.0) <= 1e-9:
-            n_theta = int(round(steps)) if abs(steps - round(steps)) < 1e-6 else int(math.ceil(steps))
+            whole = abs(steps - round(steps)) < 1e-6
+            n_theta = int(round(steps)) if whole else int(math.ceil(steps))
         else:
             n_theta = int(math.floor(steps * (1 + _STEP_SLACK))) + 1
         theta = np.radians(t0 + np.arange(n_theta) * theta_step_deg)

@@ -79,7 +79,7 @@ def result_to_cloud(result: InverseResult, *, z_mm: float, section: int) -> Clou
         pts = np.column_stack([r * np.cos(th), r * np.sin(th), np.full(n, float(z_mm))])
         code = VIEW_CODES.get(name, 255)
         intensity = np.nan_to_num(v.intensity[m]).astype(np.float32)
-        quality = np.where(np.isfinite(r), 0, np.maximum(v.quality[m], 1)).astype(np.uint8)
+        quality = v.quality[m].astype(np.uint8)
         parts.append(Cloud(pts, th, r, np.full(n, code, np.uint8), quality,
                            np.full(n, section, np.int32), intensity))
     return Cloud.concatenate(parts)

@@ -274,9 +274,9 @@ def coverage(rig: Rig, radius_mm: float, *, theta_step_deg: float = 0.1, max_bou
         name = view_name(seq, rig.mirrors)
         ok, leave, _ = path_valid(pts0, cam.center_mm - shift, seq, mirrors, radius_mm)
         ok &= np.einsum("ij,ij->i", leave, normal) > cos_max
-        T = np.eye(4)
+        T = np.eye(4)  # object → m1 → m2 → camera: the camera sees T_m2 · T_m1 · X
         for k in seq:
-            T = T @ rig.mirrors[k].T
+            T = rig.mirrors[k].T @ T
         uv = project_points(pts, cam.K, cam.distortion, cam.R, cam.t_mm, T_mirror=T)
         inside = (uv[:, 0] >= -0.5 + margin_px) & (uv[:, 0] <= cam.width_px - 0.5 - margin_px) & \
                  (uv[:, 1] >= -0.5 + margin_px) & (uv[:, 1] <= cam.height_px - 0.5 - margin_px)

@@ -1,0 +1,300 @@
+"""Views of the section in one image (direct, through one or two mirrors) and their θ windows.
+
+A *view* is the camera seen through an ordered sequence of mirrors (paper §3.2, Eq. 4).  A
+point ``X_cam`` (camera frame) reaches the image of view ``a-b`` (light path object →
+mirror ``a`` → mirror ``b`` → camera) at ``P · T_b · T_a · X_cam``: the camera sees the
+mirror image of the mirror image.  With ``X_cam = T_cam_meas X_meas`` the grid of the
+measurement frame maps to pixels by ``P · T_view · T_cam_meas``; the direct view has
+``T_view = I``.  (At β = 90° the
+two double reflections have equal ``T_view`` — the corner shows them side by side.)
+
+The θ window of a view (:func:`view_windows`) is derived from the calibration, never typed in:
+a grid point ``r (cos θ, sin θ, 0)`` of the measurement frame is in the window when, for
+every tested radius of the grid's range,
+
+1. the surface of a section centred on the axis faces the view's (virtual) camera: the angle
+   between the radial normal and the direction to the virtual camera is below
+   ``max_incidence_deg``;
+2. the straight path to the virtual camera, folded at each mirror, meets every mirror on its
+   reflecting side and — where the calibration knows the mirror's corners — inside its
+   rectangle, and no segment is blocked by the object (an infinite cylinder of that radius
+   about the axis, the conservative model of a long part) or by another mirror of known extent;
+3. the point projects inside the image (``margin_px`` from the border of the pixel-centre hull).
+
+The laser's reach is not tested: the calibration knows the laser plane but not the fan's apex
+or extent.  A θ inside the window that no laser light reaches just gives ``NO_PEAK``.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from lts360.geometry.camera import project_camera_points
+from lts360.geometry.mirror import mirror_matrix, transform_plane
+from lts360.recon.calibration import Calibration
+
+__all__ = ["View", "make_views", "get_views", "view_transform", "project_meas_points",
+           "view_windows", "DEFAULT_MAX_INCIDENCE_DEG", "DIRECT"]
+
+DIRECT = "direct"
+DEFAULT_MAX_INCIDENCE_DEG = 80.0
+#: Radii tested across the grid's range when deriving windows (both ends and the middle).
+DEFAULT_WINDOW_RADII = 3
+_EPS_MM = 1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class View:
+    """One view of the section.
+
+    Attributes
+    ----------
+    name : str
+        ``"direct"``, a mirror name, or mirror names joined by ``"-"`` in the order the light
+        meets them leaving the object (``"left-right"``: object → left → right → camera).
+    mirrors : tuple of str
+        That order.
+    T_cam : (4, 4) float
+        ``T_{m_k} ⋯ T_{m_1}`` (paper Eq. 3, camera frame): a real point ``X_cam`` appears in
+        this view where ``T_cam X_cam`` projects (Eq. 4).  Identity for the direct view.
+    """
+
+    name: str
+    mirrors: tuple[str, ...]
+    T_cam: np.ndarray
+
+    @property
+    def n_reflections(self) -> int:
+        return len(self.mirrors)
+
+    @property
+    def virtual_camera_cam_mm(self) -> np.ndarray:
+        """Centre of the virtual camera in the camera frame, ``T_cam⁻¹ · 0``."""
+        return np.linalg.solve(self.T_cam, np.array([0.0, 0.0, 0.0, 1.0]))[:3]
+
+
+def _view(cal: Calibration, seq: tuple[str, ...]) -> View:
+    T = np.eye(4)
+    for name in seq:  # T = T_{m_k} ⋯ T_{m_1}
+        m = cal.mirror(name)
+        T = mirror_matrix(m.n, m.d_mm) @ T
+    T.setflags(write=False)
+    return View(name=DIRECT if not seq else "-".join(seq), mirrors=tuple(seq), T_cam=T)
+
+
+def make_views(cal: Calibration, *, double_reflections: bool = False) -> dict[str, View]:
+    """The direct view, one view per mirror and, optionally, every double reflection.
+
+    Returns
+    -------
+    dict str → View
+        In the order direct, single mirrors (calibration order), double reflections.
+    """
+    names = cal.mirror_names
+    seqs: list[tuple[str, ...]] = [()] + [(n,) for n in names]
+    if double_reflections:
+        seqs += [s for s in itertools.product(names, repeat=2) if s[0] != s[1]]
+    return {v.name: v for v in (_view(cal, s) for s in seqs)}
+
+
+def get_views(cal: Calibration, names) -> tuple[View, ...]:
+    """Views by name (``"direct"``, ``"left"``, ``"left-right"``, ...), validated."""
+    if isinstance(names, str):
+        names = (names,)
+    out = []
+    for name in names:
+        seq = () if name == DIRECT else tuple(str(name).split("-"))
+        unknown = [s for s in seq if s not in cal.mirror_names]
+        if unknown or any(a == b for a, b in zip(seq[:-1], seq[1:])) or not name:
+            raise ValueError(f"views: {name!r} is not a view of this calibration (direct, mirrors "
+                             f"{list(cal.mirror_names)} or 'a-b' with a != b)")
+        out.append(_view(cal, seq))
+    if len({v.name for v in out}) != len(out):
+        raise ValueError(f"views: names must be unique, got {list(names)}")
+    return tuple(out)
+
+
+def view_transform(cal: Calibration, view: View) -> np.ndarray:
+    """(4, 4) map ``T_view · T_cam_meas``: measurement frame → the frame that ``K`` projects."""
+    return view.T_cam @ cal.T_cam_meas
+
+
+def project_meas_points(points_meas_mm, cal: Calibration, view: View) -> np.ndarray:
+    """Pixels of measurement-frame points in a view (paper Eq. 4, with distortion).
+
+    Parameters
+    ----------
+    points_meas_mm : (..., 3) float
+    cal : Calibration
+    view : View
+
+    Returns
+    -------
+    (..., 2) float
+        ``(u, v)``; NaN for points behind the (virtual) camera.
+    """
+    pts = np.asarray(points_meas_mm, dtype=float)
+    if pts.shape[-1] != 3:
+        raise ValueError(f"points_meas_mm must have shape (..., 3), got {pts.shape}")
+    T = view_transform(cal, view)
+    flat = pts.reshape(-1, 3)
+    cam = flat @ T[:3, :3].T + T[:3, 3]
+    return project_camera_points(cam, cal.K, cal.dist).reshape(pts.shape[:-1] + (2,))
+
+
+# -- windows -----------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class _MeasMirror:
+    name: str
+    n: np.ndarray            # (3,) unit normal, towards the reflecting side
+    d: float
+    T: np.ndarray            # (4, 4) mirror matrix in the measurement frame
+    corners: np.ndarray | None  # (4, 3)
+
+
+def _mirrors_in_meas(cal: Calibration) -> dict[str, _MeasMirror]:
+    T_mc = cal.T_meas_cam
+    out = {}
+    for m in cal.mirrors:
+        n, d = transform_plane(m.n, m.d_mm, T_mc[:3, :3], T_mc[:3, 3])
+        corners = None if m.corners_mm is None else m.corners_mm @ T_mc[:3, :3].T + T_mc[:3, 3]
+        out[m.name] = _MeasMirror(m.name, n, d, mirror_matrix(n, d), corners)
+    return out
+
+
+def _inside_quad(points: np.ndarray, m: _MeasMirror) -> np.ndarray:
+    """Whether points on the plane of ``m`` lie inside its convex quadrilateral.
+
+    Always True for a mirror of unknown extent.
+    """
+    if m.corners is None:
+        return np.ones(len(points), dtype=bool)
+    c = m.corners
+    signs = []
+    for i in range(4):
+        edge = c[(i + 1) % 4] - c[i]
+        signs.append(np.cross(edge, points - c[i]) @ m.n)
+    s = np.stack(signs, axis=1)
+    return np.all(s >= -1e-9, axis=1) | np.all(s <= 1e-9, axis=1)
+
+
+def _blocked_by_cylinder(a: np.ndarray, b: np.ndarray, radius_mm: float) -> np.ndarray:
+    """Segments a→b (n, 3) that pass strictly inside the infinite cylinder of radius r about z."""
+    a2, d = a[:, :2], b[:, :2] - a[:, :2]
+    dd = np.einsum("ij,ij->i", d, d)
+    t = np.clip(-np.einsum("ij,ij->i", a2, d) / np.maximum(dd, 1e-300), 0.0, 1.0)
+    closest = a2 + t[:, None] * d
+    return np.einsum("ij,ij->i", closest, closest) < radius_mm**2 * (1.0 - 1e-9)
+
+
+def _blocked_by_mirrors(a: np.ndarray, b: np.ndarray, mirrors: dict[str, _MeasMirror],
+                        skip: set[str]) -> np.ndarray:
+    """Segments a→b crossing the rectangle of a mirror of known extent (other than ``skip``)."""
+    blocked = np.zeros(len(a), dtype=bool)
+    for name, m in mirrors.items():
+        if name in skip or m.corners is None:
+            continue
+        da, db = a @ m.n - m.d, b @ m.n - m.d
+        crosses = da * db < 0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(crosses, da / (da - db), 0.0)
+        blocked |= crosses & _inside_quad(a + t[:, None] * (b - a), m)
+    return blocked
+
+
+def _path_ok(points: np.ndarray, camera: np.ndarray, seq: tuple[str, ...],
+             mirrors: dict[str, _MeasMirror], radius_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """Fold the straight path from points to the virtual camera at each mirror of ``seq``.
+
+    Returns the validity (mirror hits on the reflecting side and inside known extents, no
+    blocking) and the unit direction in which the path leaves the points.
+    """
+    virtual = camera.copy()
+    for name in reversed(seq):  # virtual camera T_{m_1} ⋯ T_{m_k} C
+        T = mirrors[name].T
+        virtual = T[:3, :3] @ virtual + T[:3, 3]
+    direction = virtual - points
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    leave = direction.copy()
+    ok = np.ones(len(points), dtype=bool)
+    p = points
+    prev: str | None = None
+    for name in seq:
+        m = mirrors[name]
+        denom = direction @ m.n
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (m.d - p @ m.n) / denom
+        ok &= (denom < 0) & (t > _EPS_MM)
+        t = np.where(ok, t, 0.0)
+        hit = p + t[:, None] * direction
+        ok &= _inside_quad(hit, m)
+        if prev is not None:  # the first segment leaves the surface: the facing test covers it
+            ok &= ~_blocked_by_cylinder(p, hit, radius_mm)
+        ok &= ~_blocked_by_mirrors(p, hit, mirrors, {name} | ({prev} if prev else set()))
+        direction = direction - 2.0 * (direction @ m.n)[:, None] * m.n
+        p, prev = hit, name
+    end = np.broadcast_to(camera, p.shape)
+    if prev is not None:
+        ok &= ~_blocked_by_cylinder(p, end, radius_mm)
+    ok &= ~_blocked_by_mirrors(p, end, mirrors, {prev} if prev else set())
+    return ok, leave
+
+
+def view_windows(cal: Calibration, radius_range_mm, theta_rad, max_incidence_deg: float =
+                 DEFAULT_MAX_INCIDENCE_DEG, *, views=None, n_radii: int = DEFAULT_WINDOW_RADII,
+                 margin_px: float = 0.0) -> dict[str, np.ndarray]:
+    """Per-view θ windows derived from the calibration (see the module docstring).
+
+    Parameters
+    ----------
+    cal : Calibration
+    radius_range_mm : (float, float)
+        ``(r_min, r_max)`` of the grid; the tests hold at ``n_radii`` radii spread over it.
+    theta_rad : (nθ,) float
+        Grid angles (measurement frame).
+    max_incidence_deg : float, (0, 90]
+        Largest angle between the radial surface normal and the direction to the virtual camera.
+    views : sequence of str or View, optional
+        Default: direct and every single-mirror view.
+    n_radii : int, >= 1
+    margin_px : float, >= 0
+
+    Returns
+    -------
+    dict str → (nθ,) bool
+    """
+    r0, r1 = (float(v) for v in radius_range_mm)
+    if not 0 < r0 <= r1:
+        raise ValueError(f"radius_range_mm must satisfy 0 < r_min <= r_max, got {radius_range_mm}")
+    if not 0 < max_incidence_deg <= 90:
+        raise ValueError(f"max_incidence_deg must be in (0, 90], got {max_incidence_deg}")
+    if n_radii < 1 or margin_px < 0:
+        raise ValueError(f"n_radii must be >= 1 and margin_px >= 0, got {n_radii}, {margin_px}")
+    theta = np.asarray(theta_rad, dtype=float).ravel()
+    if views is None:
+        view_list = tuple(make_views(cal).values())
+    else:
+        view_list = tuple(v if isinstance(v, View) else get_views(cal, v)[0] for v in views)
+    mirrors = _mirrors_in_meas(cal)
+    camera = cal.T_meas_cam[:3, 3].copy()  # camera centre in the measurement frame
+    cos_max = np.cos(np.radians(max_incidence_deg))
+    normal = np.stack([np.cos(theta), np.sin(theta), np.zeros_like(theta)], axis=-1)
+    w, h = cal.image_size
+    radii = np.linspace(r0, r1, n_radii) if n_radii > 1 else np.array([0.5 * (r0 + r1)])
+    out = {}
+    for view in view_list:
+        ok = np.ones(theta.size, dtype=bool)
+        for r in radii:
+            pts = normal * r
+            path, leave = _path_ok(pts, camera, view.mirrors, mirrors, r)
+            ok &= path & (np.einsum("ij,ij->i", leave, normal) > cos_max)
+            uv = project_meas_points(pts, cal, view)
+            with np.errstate(invalid="ignore"):
+                ok &= (uv[:, 0] >= margin_px) & (uv[:, 0] <= w - 1 - margin_px) & \
+                      (uv[:, 1] >= margin_px) & (uv[:, 1] <= h - 1 - margin_px)
+        out[view.name] = ok
+    return out
