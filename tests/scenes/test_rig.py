@@ -16,7 +16,7 @@ def paper():
 def test_paper_rig_matches_the_paper(paper):
     cam, laser = paper.camera, paper.laser
     assert (cam.width_px, cam.height_px, cam.pixel_pitch_um) == (1280, 1024, 5.3)
-    assert cam.focal_length_mm == 8.0 and cam.f_number == 1.4
+    assert cam.focal_length_mm == 8.0 and cam.f_number == 2.8  # working aperture (see preset)
     assert laser.wavelength_nm == 660.0 and laser.power_mW == 1.0 and laser.fan_angle_deg == 50.0
     # Triangulation angle: between the optical axis and the laser plane z = 0.
     alpha = math.degrees(math.asin(abs(cam.optical_axis @ laser.normal)))
