@@ -170,6 +170,7 @@ def _cmd_measure(args) -> int:
         raise UsageError(f"--out: directory {str(out.parent)!r} does not exist")
     t0 = __import__("time").perf_counter()
     cloud = measure_sections(sections, cal, grid, peak=args.peak, compensate=args.compensate,
+                             backend=args.backend,
                              progress=(lambda it: _progress(it, "sections")) if len(sections) > 1
                              else None)
     dt = __import__("time").perf_counter() - t0
@@ -281,6 +282,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--pitch-mm", type=float, default=None, help="stage pitch for bare images")
     s.add_argument("--compensate", action="store_true",
                    help="apply the calibration's residual compensation (paper §4.4)")
+    s.add_argument("--backend", choices=("auto", "numpy", "llvm", "cuda"), default="auto",
+                   help="auto: the Dr.Jit kernel for the centroid, numpy otherwise")
     s.set_defaults(func=_cmd_measure)
 
     s = sub.add_parser("score", help="score a measured cloud against the truth of rendered frames")

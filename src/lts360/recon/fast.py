@@ -156,17 +156,25 @@ class FastInverse:
         return res
 
     def __call__(self, image, *, threshold: float | None = None, saturation: float | None = None,
-                 accept=DEFAULT_ACCEPT) -> InverseResult:
-        """Same result as ``inverse_triangulate(image, cal, grid, peak="centroid", plan=plan)``."""
+                 accept=DEFAULT_ACCEPT, compensate: bool = False) -> InverseResult:
+        """Same result as ``inverse_triangulate(image, cal, grid, peak="centroid", plan=plan,
+        compensate=compensate)`` (to float32 rounding)."""
         img = np.asarray(image)
         thr = default_threshold(img) if threshold is None else float(threshold)
         sat = default_saturation(img) if saturation is None else float(saturation)
         if sat is not None and sat <= thr:
             sat = None
         peaks = self.peaks(img, threshold=thr, saturation=sat)
+        cal = self.plan.cal
+
+        def offset(name):
+            if compensate and name != "direct":
+                return np.asarray(cal.view_offsets_mm.get(name, np.zeros(2)), dtype=float)
+            return np.zeros(2)
+
         views = {name: assemble_view(self.plan.views[name], self.plan.grid, pk, accept=accept,
-                                     offset_mm=np.zeros(2))
+                                     offset_mm=offset(name))
                  for name, pk in peaks.items()}
         return InverseResult(grid=self.plan.grid, views=views, peak="centroid", threshold=thr,
-                             saturation=sat, compensated=False,
+                             saturation=sat, compensated=bool(compensate),
                              accept=tuple(Quality(q) for q in accept))

@@ -86,13 +86,36 @@ def result_to_cloud(result: InverseResult, *, z_mm: float, section: int) -> Clou
 
 
 def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *,
-                     peak: str = "centroid", compensate: bool = False, progress=None) -> Cloud:
-    """Inverse triangulation of every section with one precomputed plan."""
-    plan = plan_inverse(cal, grid, precompute=True)
+                     peak: str = "centroid", compensate: bool = False, backend: str = "auto",
+                     progress=None) -> Cloud:
+    """Inverse triangulation of every section with one plan.
+
+    ``backend``: ``numpy`` (the reference), ``llvm`` or ``cuda`` (the Dr.Jit kernel of the
+    centroid detector, :class:`lts360.recon.fast.FastInverse`), or ``auto`` (Dr.Jit LLVM for
+    the centroid when available, numpy otherwise).
+    """
+    if backend not in ("auto", "numpy", "llvm", "cuda"):
+        raise ValueError(f"backend must be auto, numpy, llvm or cuda, got {backend!r}")
+    fast = None
+    if peak == "centroid" and backend != "numpy":
+        from lts360.recon.fast import FastInverse
+
+        try:
+            fast = FastInverse(plan_inverse(cal, grid, precompute=False),
+                               backend="llvm" if backend == "auto" else backend)
+        except RuntimeError:
+            if backend != "auto":
+                raise
+    elif backend in ("llvm", "cuda"):
+        raise ValueError(f"the Dr.Jit backend implements the centroid detector only, not {peak!r}")
+    plan = fast.plan if fast is not None else plan_inverse(cal, grid, precompute=True)
     clouds = []
     items = list(enumerate(sections))
     for k, s in (progress(items) if progress else items):
         img = _read_image(s.image_path)
-        res = inverse_triangulate(img, cal, grid, peak=peak, compensate=compensate, plan=plan)
+        if fast is not None:
+            res = fast(img, compensate=compensate)
+        else:
+            res = inverse_triangulate(img, cal, grid, peak=peak, compensate=compensate, plan=plan)
         clouds.append(result_to_cloud(res, z_mm=s.z_mm, section=k))
     return Cloud.concatenate(clouds)
