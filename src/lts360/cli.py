@@ -170,13 +170,14 @@ def _cmd_measure(args) -> int:
         raise UsageError(f"--out: directory {str(out.parent)!r} does not exist")
     t0 = __import__("time").perf_counter()
     cloud = measure_sections(sections, cal, grid, peak=args.peak, compensate=args.compensate,
-                             backend=args.backend,
+                             backend=args.backend, method=args.method,
                              progress=(lambda it: _progress(it, "sections")) if len(sections) > 1
                              else None)
     dt = __import__("time").perf_counter() - t0
     write_cloud(out, cloud)
     valid = cloud.valid
-    print(f"{len(sections)} section(s), grid {grid.n_theta} θ × {grid.n_r} r, peak {args.peak}: "
+    what = f"peak {args.peak}" if args.method == "inverse" else "classic (Steger 2-D)"
+    print(f"{len(sections)} section(s), grid {grid.n_theta} θ × {grid.n_r} r, {what}: "
           f"{int(valid.sum())} valid points of {len(cloud)} θ samples in {dt:.2f} s -> {out}")
     return 0
 
@@ -272,8 +273,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--calibration", required=True,
                    help="calibration.json, or a rendered frame's frame.json (the true rig)")
     s.add_argument("--out", required=True, help="cloud.ply")
-    s.add_argument("--method", choices=("inverse",), default="inverse",
-                   help="inverse triangulation (paper §3.2)")
+    s.add_argument("--method", choices=("inverse", "classic"), default="inverse",
+                   help="inverse triangulation (paper §3.2) or the classical image-space baseline")
     s.add_argument("--peak", choices=("centroid", "gauss", "steger"), default="centroid")
     s.add_argument("--theta-step-deg", type=float, default=0.1)
     s.add_argument("--r-step-mm", type=float, default=0.005)

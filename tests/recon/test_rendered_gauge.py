@@ -51,3 +51,24 @@ def test_plug_gauge_from_its_image(rendered, peak, bias_um, rms_um):
     assert m["rms_mm"] * 1e3 <= rms_um, m["rms_mm"]
     for view in ("direct", "left", "right"):
         assert m["views"][view]["n"] > 300
+
+
+def test_classic_baseline_on_the_same_image(rendered):
+    """Forward triangulation (Steger 2-D centres, rays ∩ laser plane) on the same image.
+
+    Measured: radius bias −1.4 µm, RMS 4.0 µm, ~490 points (one per stripe pixel) against
+    the inverse method's 4385 (one per 0.1° per view).
+    """
+    from lts360.recon.classic import classic_triangulate
+    from lts360.recon.measure import classic_to_cloud
+
+    obj, frame, cal = rendered
+    grid = CylGrid.from_ranges((8.0, 12.0), theta_step_deg=0.2, r_step_mm=0.005)
+    res = classic_triangulate(frame.image, cal, grid)
+    m = score_cloud(classic_to_cloud(res, z_mm=0.0, section=0), obj, use_mesh=False)
+    for view in ("direct", "left", "right"):
+        assert m["views"][view]["n"] > 80
+        # Points lie on the laser plane exactly (ray ∩ plane).
+        assert np.abs(res[view]["points_meas_mm"][:, 2]).max() < 1e-9
+    assert abs(m["radius_bias_mm"]) * 1e3 <= 3.0
+    assert m["rms_mm"] * 1e3 <= 8.0

@@ -85,15 +85,38 @@ def result_to_cloud(result: InverseResult, *, z_mm: float, section: int) -> Clou
     return Cloud.concatenate(parts)
 
 
+def classic_to_cloud(res: dict, *, z_mm: float, section: int) -> Cloud:
+    """Points of :func:`lts360.recon.classic.classic_triangulate` as cloud rows."""
+    parts = []
+    for name, v in res.items():
+        n = len(v["r_mm"])
+        pts = np.column_stack([v["points_meas_mm"][:, :2], np.full(n, float(z_mm))])
+        parts.append(Cloud(pts, v["theta_rad"], v["r_mm"], np.full(n, VIEW_CODES.get(name, 255), np.uint8),
+                           np.zeros(n, np.uint8), np.full(n, section, np.int32),
+                           v["intensity"].astype(np.float32)))
+    return Cloud.concatenate(parts)
+
+
 def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *,
                      peak: str = "centroid", compensate: bool = False, backend: str = "auto",
-                     progress=None) -> Cloud:
+                     method: str = "inverse", progress=None) -> Cloud:
     """Inverse triangulation of every section with one plan.
 
     ``backend``: ``numpy`` (the reference), ``llvm`` or ``cuda`` (the Dr.Jit kernel of the
     centroid detector, :class:`lts360.recon.fast.FastInverse`), or ``auto`` (Dr.Jit LLVM for
     the centroid when available, numpy otherwise).
     """
+    if method == "classic":
+        from lts360.recon.classic import classic_triangulate, view_regions
+
+        regions = view_regions(cal, grid)
+        items = list(enumerate(sections))
+        return Cloud.concatenate([
+            classic_to_cloud(classic_triangulate(_read_image(s.image_path), cal, grid, regions=regions),
+                             z_mm=s.z_mm, section=k)
+            for k, s in (progress(items) if progress else items)])
+    if method != "inverse":
+        raise ValueError(f"method must be 'inverse' or 'classic', got {method!r}")
     if backend not in ("auto", "numpy", "llvm", "cuda"):
         raise ValueError(f"backend must be auto, numpy, llvm or cuda, got {backend!r}")
     fast = None
