@@ -65,6 +65,17 @@ def main() -> None:
         fast(frame.image)
         times.append(time.perf_counter() - t0)
     out["drjit_llvm_centroid"] = {"first_s": times[0], "median_s": statistics.median(times[1:])}
+    from lts360.recon.classic import classic_triangulate, view_regions
+
+    t0 = time.perf_counter()
+    regions = view_regions(cal, grid)
+    out["classic_regions_s"] = time.perf_counter() - t0
+    times = []
+    for _ in range(args.repeats):
+        t0 = time.perf_counter()
+        classic_triangulate(frame.image, cal, grid, regions=regions)
+        times.append(time.perf_counter() - t0)
+    out["classic"] = {"median_s": statistics.median(times)}
     text = json.dumps(out, indent=2)
     print(text)
     if args.json:
