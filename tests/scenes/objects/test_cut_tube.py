@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 import lts360.scenes.objects.cut_tube as ct
 from lts360.scenes.objects.base import Placement
 from lts360.scenes.objects.registry import build_object, parse_spec
+from meshcheck import face_points, outermost_hit_radius, radial_error  # noqa: E402
 
 P = ct.CutTubeParams
 #: Vertices of the tube are computed from the radius directly, those of the cut by Manifold in
@@ -24,41 +25,6 @@ _PROBES = np.array([[1 / 3, 1 / 3, 1 / 3], [0.5, 0.5, 0.0], [0.5, 0.0, 0.5], [0.
 
 
 # --- helpers (same in every object test module) -------------------------------------------
-
-def radial_error(points_mm, radius_fn):
-    """(n,) radius of each object-frame point minus the true radius at its (θ, z)."""
-    theta = np.arctan2(points_mm[:, 1], points_mm[:, 0])
-    return np.hypot(points_mm[:, 0], points_mm[:, 1]) - radius_fn(theta, points_mm[:, 2])
-
-
-def face_points(tri, weights):
-    """(m·k, 3) points of barycentric ``weights`` (k, 3) on triangles ``tri`` (m, 3, 3)."""
-    return np.einsum("kj,mjd->mkd", weights, tri).reshape(-1, 3)
-
-
-def outermost_hit_radius(tri, theta, z):
-    """Largest radius at which the horizontal ray from the axis point (0, 0, z) in direction
-    θ meets one of the triangles ``tri`` (m, 3, 3); NaN where it meets none."""
-    zmin, zmax = tri[:, :, 2].min(1), tri[:, :, 2].max(1)
-    out = np.full(len(theta), np.nan)
-    for k, (t, zz) in enumerate(zip(theta, z)):
-        cand = tri[(zmin <= zz) & (zmax >= zz)]
-        d = np.array([math.cos(t), math.sin(t), 0.0])
-        e1, e2 = cand[:, 1] - cand[:, 0], cand[:, 2] - cand[:, 0]
-        p = np.cross(d, e2)
-        det = np.einsum("ij,ij->i", e1, p)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / det
-            s = np.array([0.0, 0.0, zz]) - cand[:, 0]
-            u = np.einsum("ij,ij->i", s, p) * inv
-            q = np.cross(s, e1)
-            v = (q @ d) * inv
-            dist = np.einsum("ij,ij->i", q, e2) * inv
-        eps = 1e-12
-        hit = (np.abs(det) > 1e-300) & (u >= -eps) & (v >= -eps) & (u + v <= 1 + eps) & (dist > 0)
-        if hit.any():
-            out[k] = dist[hit].max()
-    return out
 
 
 # --- fixtures --------------------------------------------------------------------------------
