@@ -146,6 +146,10 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
         n = V(m.normal)
         return p - 2.0 * (dr.dot(p, n) - m.d_mm) * n
 
+    scalar = not dr.is_array_v(mi.Float)  # scalar_* variants: one sample at a time
+
+    def NOT(mask):  # ``~`` of a Python bool (scalar variants) is an int, not a negation
+        return (not mask) if isinstance(mask, bool) else ~mask
     half_fan = laser.half_fan_rad
     if laser.fan_profile == "flat":
         fan_norm = 1.0 / (2.0 * half_fan)
@@ -207,7 +211,7 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
                     ray = mi.Ray3f(p, dr.normalize(hit_off - p))
                     ray.maxt = dr.norm(hit_off - p)
                 ray.maxt = ray.maxt * (1.0 - _SHADOW_EPS)
-                vis = vis & ~scene.ray_test(ray, vis)
+                vis = vis & NOT(scene.ray_test(ray, vis))
                 target = reflect_point(target, m)
                 p = hit_off
                 first = False
@@ -218,7 +222,7 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
                 ray = mi.Ray3f(p, dr.normalize(end - p))
                 ray.maxt = dr.norm(end - p)
             ray.maxt = ray.maxt * (1.0 - _SHADOW_EPS)
-            return vis & ~scene.ray_test(ray, vis)
+            return vis & NOT(scene.ray_test(ray, vis))
 
         def _laser(self, scene, si, bsdf, active):
             ctx = mi.BSDFContext()
@@ -254,10 +258,12 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
                 si = scene.ray_intersect(ray, active)
                 valid = active & si.is_valid()
                 if env is not None:
-                    L += dr.select(active & ~si.is_valid(), throughput * env.eval(si, active), 0.0)
+                    L += dr.select(active & NOT(si.is_valid()), throughput * env.eval(si, active), 0.0)
+                if scalar and not valid:  # a scalar miss has no BSDF to ask for its flags
+                    break
                 bsdf = si.bsdf(ray)
                 is_mirror = valid & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta)
-                found = found | (valid & ~is_mirror)
+                found = found | (valid & NOT(is_mirror))
                 if depth == max_bounces:
                     break
                 bs, w = bsdf.sample(ctx, si, sampler.next_1d(is_mirror), sampler.next_2d(is_mirror),
@@ -267,6 +273,8 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
                 active = is_mirror & (bs.pdf > 0)
             # 2. Shade once at that surface: the laser through every mirror sequence (method of
             #    images) and the ambient light by emitter sampling.
+            if scalar and not found:
+                return L, mi.Bool(True), [mi.Float(0.0)]
             si = scene.ray_intersect(ray, found)
             found = found & si.is_valid()
             bsdf = si.bsdf(ray)
