@@ -104,6 +104,10 @@ def _cmd_render(args) -> int:
         raise UsageError(f"--seed: must be >= 0, got {args.seed}")
     if not 0 < args.scale <= 1:
         raise UsageError(f"--scale: must be in (0, 1], got {args.scale}")
+    if not 0 < args.exposure_fraction <= 1:
+        raise UsageError(f"--exposure-fraction: must be in (0, 1], got {args.exposure_fraction}")
+    if args.exposure_us is not None and not 0 < args.exposure_us <= 1e7:
+        raise UsageError(f"--exposure-us: must be in (0, 1e7], got {args.exposure_us}")
     if args.sections < 1 or args.sections > 10000:
         raise UsageError(f"--sections: must be in [1, 10000], got {args.sections}")
     if args.sections > 1 and not args.pitch_mm > 0:
@@ -116,7 +120,9 @@ def _cmd_render(args) -> int:
     variant = _set_variant(args.variant)
     kw = dict(spp=args.spp, seed=args.seed, noise=args.noise, laser_on=args.laser == "on",
               ambient=args.ambient, scale=args.scale, max_bounces=args.max_bounces,
-              thin_lens=not args.pinhole, background_z_mm=args.background_z_mm)
+              thin_lens=not args.pinhole, background_z_mm=args.background_z_mm,
+              exposure_time_s=None if args.exposure_us is None else args.exposure_us * 1e-6,
+              exposure_fraction=args.exposure_fraction)
     if args.sections == 1:
         frame = simulate_frame(rig, obj, z_mm=args.z_mm, **kw)
         write_frame(out, frame)
@@ -262,6 +268,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--max-bounces", type=int, choices=(0, 1, 2, 3), default=2,
                    help="mirror reflections followed on camera and laser paths (default 2)")
     s.add_argument("--pinhole", action="store_true", help="pinhole instead of the thin lens")
+    s.add_argument("--exposure-us", type=float, default=None,
+                   help="fixed exposure time (default: auto-exposure)")
+    s.add_argument("--exposure-fraction", type=float, default=0.8,
+                   help="auto-exposure target: brightest stripe pixels at this fraction of full scale")
     s.add_argument("--background-z-mm", type=float, default=None,
                    help="add a matte black base plate at this height (default: none)")
     s.add_argument("--sections", type=int, default=1, help="render a scan of N sections")

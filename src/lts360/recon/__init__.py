@@ -1,0 +1,17 @@
+"""Image → 3-D: calibration model, inverse triangulation (paper §3.2), peak detectors, the
+classical baseline and measured clouds.
+
+Never imports :mod:`lts360.simulator` or any ground truth: it runs on real camera images and
+a real calibration file.  Import the submodules directly; the most used names are here.
+"""
+
+from lts360.recon.calibration import Calibration, MirrorPlane, load_calibration, save_calibration
+from lts360.recon.cloud import Cloud, read_cloud, write_cloud
+from lts360.recon.grid import CylGrid
+from lts360.recon.inverse import (InverseResult, estimate_view_offsets, inverse_triangulate,
+                                  plan_inverse)
+from lts360.recon.peaks import Quality, detect_peaks
+
+__all__ = ["Calibration", "MirrorPlane", "load_calibration", "save_calibration", "Cloud",
+           "read_cloud", "write_cloud", "CylGrid", "InverseResult", "estimate_view_offsets",
+           "inverse_triangulate", "plan_inverse", "Quality", "detect_peaks"]

@@ -54,7 +54,7 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
                    scale: float = 1.0, z_mm: float = 0.0, max_bounces: int = 2,
                    thin_lens: bool = True, exposure_time_s: float | None = None,
                    speckle_seed: int | None = None, background_z_mm: float | None = None,
-                   extra_meshes: tuple = ()) -> Frame:
+                   exposure_fraction: float = 0.8, extra_meshes: tuple = ()) -> Frame:
     """Render one frame of ``obj`` in ``rig`` at stage height ``z_mm``.
 
     Parameters
@@ -64,8 +64,8 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
         ``realistic``: EMVA 1288 noise (shot, dark/read, DSNU, PRNU, quantisation, saturation)
         and laser speckle on the laser's share of the light.
     exposure_time_s : float, optional
-        Fixed exposure; by default auto-exposure puts the brightest stripe pixels at 80 % of
-        full scale, as the paper adjusts the exposure time.
+        Fixed exposure; by default auto-exposure puts the brightest stripe pixels at
+        ``exposure_fraction`` (default 80 %) of full scale, as the paper adjusts the exposure.
     seed : int
         Seeds the renderer's sampler, the temporal noise and (unless ``speckle_seed`` is
         given) the speckle.  The sensor's fixed pattern (DSNU/PRNU) comes from the rig's
@@ -103,11 +103,11 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
         radiance = radiance + res.laser_W_m2_sr * (pattern - 1.0)
     if exposure_time_s is None:
         # The brightest stripe pixels (99.9th percentile of the laser-lit pixels, robust to a
-        # few glints) at 80 % of full scale; without laser light, the whole image.
+        # few glints) at `exposure_fraction` of full scale; without laser light, the whole image.
         lit = res.laser_W_m2_sr > 0
         exposure_time_s = sensor_mod.auto_exposure(
             res.radiance_W_m2_sr, sens, wavelength_nm=rig.laser.wavelength_nm,
-            f_number=cam.f_number, pixel_pitch_um=pitch_um, target_fraction=0.8,
+            f_number=cam.f_number, pixel_pitch_um=pitch_um, target_fraction=exposure_fraction,
             percentile=99.9, mask=lit if lit.any() else None, magnification=magnification)
     electrons = sensor_mod.radiance_to_electrons_mean(
         radiance, wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
