@@ -60,14 +60,23 @@ class FastInverse:
         self.stride = w + _PAD_BEFORE + _PAD_AFTER
         self.nr = plan.grid.n_r
         self._r = mod.Float(np.asarray(plan.grid.r_mm, dtype=np.float32))
-        self._views = {}
+        # All views in one launch: their windowed rows are stacked (each row is nr samples).
+        us, vs, ins, self._rows = [], [], [], {}
+        start = 0
         for name, vp in plan.views.items():
             uv = vp.uv.reshape(-1, 2)
             with np.errstate(invalid="ignore"):
                 inside = (uv[:, 0] >= 0) & (uv[:, 0] <= w - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= h - 1)
-            u = np.where(inside, uv[:, 0], 0.0).astype(np.float32)
-            v = np.where(inside, uv[:, 1], 0.0).astype(np.float32)
-            self._views[name] = (mod.Float(u), mod.Float(v), mod.Bool(inside), len(vp.theta_index))
+            us.append(np.where(inside, uv[:, 0], 0.0).astype(np.float32))
+            vs.append(np.where(inside, uv[:, 1], 0.0).astype(np.float32))
+            ins.append(inside)
+            k = len(vp.theta_index)
+            self._rows[name] = (start, start + k)
+            start += k
+        self._n_rows = start
+        self._u = mod.Float(np.concatenate(us))
+        self._v = mod.Float(np.concatenate(vs))
+        self._inside = mod.Bool(np.concatenate(ins))
 
     def _keys(self, x):
         dr = self.dr
@@ -135,19 +144,17 @@ class FastInverse:
         padded = np.pad(img.astype(np.float32), ((_PAD_BEFORE, _PAD_AFTER), (_PAD_BEFORE, _PAD_AFTER)),
                         mode="edge")
         dimg = mod.Float(padded.ravel())
-        outs = {}
-        for name, (u, v, inside, k) in self._views.items():
-            vals = self._sample(dimg, u, v, inside)
-            rc, q, peak = self._centroid(vals, k, float(threshold),
-                                         None if saturation is None else float(saturation),
-                                         float(second_peak_fraction))
-            outs[name] = (rc, q, peak)
-        dr.eval(*[x for triple in outs.values() for x in triple])
+        vals = self._sample(dimg, self._u, self._v, self._inside)
+        rc, q, peak = self._centroid(vals, self._n_rows, float(threshold),
+                                     None if saturation is None else float(saturation),
+                                     float(second_peak_fraction))
+        dr.eval(rc, q, peak)
+        r_all = np.asarray(rc, dtype=float)
+        q_all = np.asarray(q, dtype=np.uint8)
+        p_all = np.asarray(peak, dtype=float)
         res = {}
-        for name, (rc, q, peak) in outs.items():
-            r = np.asarray(rc, dtype=float)
-            quality = np.asarray(q, dtype=np.uint8)
-            pk = np.asarray(peak, dtype=float)
+        for name, (a, b) in self._rows.items():
+            r, quality, pk = r_all[a:b], q_all[a:b], p_all[a:b]
             quality = np.where(np.isfinite(r) | (quality == Quality.NO_PEAK), quality,
                                np.uint8(Quality.NO_PEAK)).astype(np.uint8)
             r = np.where(quality == Quality.NO_PEAK, np.nan, r)
