@@ -189,7 +189,6 @@ def _cmd_measure(args) -> int:
 
 
 def _cmd_score(args) -> int:
-    import json
 
     from lts360.experiments.score import load_truth, score_cloud
     from lts360.recon.cloud import read_cloud
