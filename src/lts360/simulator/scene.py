@@ -16,8 +16,8 @@ import trimesh
 from lts360.scenes.rig import Mirror, Rig
 from lts360.simulator.materials import material_to_bsdf, mirror_bsdf
 
-__all__ = ["AMBIENT_RADIANCE_W_M2_SR", "SceneSpec", "mirror_shape", "mesh_shape", "scene_dict",
-           "load_scene"]
+__all__ = ["AMBIENT_RADIANCE_W_M2_SR", "SceneSpec", "mirror_shape", "mesh_shape", "chessboard_shape",
+           "scene_dict", "load_scene"]
 
 #: Effective in-band radiance of the ambient light (a uniform environment), W m⁻² sr⁻¹.
 #: ``bright``: a white surface under it (ρ ≈ 0.8) has ~0.8 W m⁻² sr⁻¹, about an office at
@@ -37,6 +37,8 @@ class SceneSpec:
         Shapes in world millimetres (the object under test, a calibration board, ...).
     ambient : str
         ``off``, ``dim`` or ``bright``.
+    targets : tuple of lts360.scenes.targets.Chessboard
+        Printed calibration targets (textured, Lambertian).
     background_z_mm : float, optional
         Height of a matte black base plate (ρ = 0.04, 400 × 400 mm, facing +Z) that the
         object stands on, like the stage's table; ``None``: no background (black void).
@@ -46,6 +48,7 @@ class SceneSpec:
     meshes: tuple
     ambient: str = "off"
     background_z_mm: float | None = None
+    targets: tuple = ()
 
     def __post_init__(self) -> None:
         if self.ambient not in AMBIENT_RADIANCE_W_M2_SR:
@@ -84,6 +87,8 @@ def scene_dict(spec: SceneSpec, sensor: dict, directory: str) -> dict:
         d[f"mirror_{m.name}"] = mirror_shape(m)
     for name, mesh, bsdf in spec.meshes:
         d[name] = mesh_shape(mesh, bsdf, directory, name)
+    for k, board in enumerate(spec.targets):
+        d[f"target_{k}"] = chessboard_shape(board)
     if spec.background_z_mm is not None:
         import mitsuba as mi
 
@@ -95,6 +100,22 @@ def scene_dict(spec: SceneSpec, sensor: dict, directory: str) -> dict:
     if radiance > 0:
         d["ambient"] = {"type": "constant", "radiance": {"type": "spectrum", "value": radiance}}
     return d
+
+
+def chessboard_shape(board, px_per_square: int = 64) -> dict:
+    """The printed side of a chessboard: a rectangle with a nearest-neighbour albedo texture.
+
+    The glass plate behind the print is not modelled (it is transparent and behind the print).
+    """
+    import mitsuba as mi
+
+    # Mitsuba's rectangle maps bitmap row 0 to v = 0, its local y = -1 (the board's y_min);
+    # texture() follows the image convention (row 0 at y_max): flip the rows.
+    tex = np.ascontiguousarray(board.texture(px_per_square)[::-1])
+    return {"type": "rectangle", "to_world": mi.ScalarTransform4f(board.rectangle_transform().tolist()),
+            "bsdf": {"type": "diffuse",
+                     "reflectance": {"type": "bitmap", "data": mi.TensorXf(tex[:, :, None].astype(np.float32)),
+                                     "raw": True, "filter_type": "nearest", "wrap_mode": "clamp"}}}
 
 
 def load_scene(spec: SceneSpec, sensor: dict):
