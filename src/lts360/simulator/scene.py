@@ -102,7 +102,7 @@ def scene_dict(spec: SceneSpec, sensor: dict, directory: str) -> dict:
     return d
 
 
-def chessboard_shape(board, px_per_square: int = 64) -> dict:
+def chessboard_shape(board, px_per_square: int = 256) -> dict:
     """The printed side of a chessboard: a rectangle with a nearest-neighbour albedo texture.
 
     The glass plate behind the print is not modelled (it is transparent and behind the print).

@@ -1,0 +1,144 @@
+"""Camera calibration from chessboard images: Zhang's method with OpenCV (paper §4.2).
+
+Corners are found with OpenCV's sector-based detector (``findChessboardCornersSB`` with
+``CALIB_CB_ACCURACY``: sub-pixel by design); ``calibrateCameraExtended`` estimates K, the
+distortion (k1, k2, p1, p2, k3) and every board pose with their standard deviations; images
+whose RMS reprojection error exceeds ``max_image_rms_px`` (or ``outlier_factor`` × the median)
+are discarded and the calibration is repeated, as the paper does.  No ground truth is read.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["BoardGeometry", "CameraCalibration", "detect_corners", "calibrate_camera"]
+
+
+@dataclass(frozen=True)
+class BoardGeometry:
+    """What a real calibration needs to know of a printed board (the manifest).
+
+    Attributes
+    ----------
+    pattern_size : (int, int)
+        Inner corners per row and per column (OpenCV's ``patternSize``).
+    square_mm : float
+        Side of a square (measured, e.g. on a coordinate measuring machine).
+    """
+
+    pattern_size: tuple[int, int]
+    square_mm: float
+
+    def __post_init__(self) -> None:
+        nx, ny = self.pattern_size
+        if not (isinstance(nx, (int, np.integer)) and isinstance(ny, (int, np.integer))
+                and nx >= 2 and ny >= 2):
+            raise ValueError(f"pattern_size must be two integers >= 2, got {self.pattern_size!r}")
+        if not self.square_mm > 0:
+            raise ValueError(f"square_mm must be > 0, got {self.square_mm!r}")
+
+    def object_points(self) -> np.ndarray:
+        """(n, 3) float32 corners in the board frame, OpenCV's row-major order."""
+        nx, ny = self.pattern_size
+        i, j = np.meshgrid(np.arange(nx), np.arange(ny))
+        return (np.column_stack([i.ravel(), j.ravel(), np.zeros(nx * ny)])
+                * self.square_mm).astype(np.float32)
+
+
+@dataclass(frozen=True, eq=False)
+class CameraCalibration:
+    """Result of :func:`calibrate_camera`.
+
+    Attributes
+    ----------
+    K : (3, 3) float
+    dist : (5,) float
+        ``(k1, k2, p1, p2, k3)``.
+    image_size : (int, int)
+        ``(width, height)``.
+    rms_px : float
+        Overall RMS reprojection error of the kept images.
+    per_image_rms_px : (m,) float
+        Of the kept images.
+    used : (n,) bool
+        Which input images were detected and kept.
+    std_intrinsics : (18,) float
+        OpenCV's standard deviations (fx, fy, cx, cy, k1, k2, p1, p2, k3, …).
+    rvecs, tvecs : list of (3,) float
+        Board poses of the kept images (board → camera).
+    corners : list of (n, 2) float
+        Detected corners of the kept images.
+    """
+
+    K: np.ndarray
+    dist: np.ndarray
+    image_size: tuple[int, int]
+    rms_px: float
+    per_image_rms_px: np.ndarray
+    used: np.ndarray
+    std_intrinsics: np.ndarray
+    rvecs: list = field(default_factory=list)
+    tvecs: list = field(default_factory=list)
+    corners: list = field(default_factory=list)
+
+
+def _to_u8(image) -> np.ndarray:
+    img = np.asarray(image)
+    if img.dtype == np.uint8:
+        return img
+    img = img.astype(float)
+    hi = np.percentile(img, 99.9)
+    return np.clip(img / (hi if hi > 0 else 1.0) * 255.0, 0, 255).astype(np.uint8)
+
+
+def detect_corners(image, board: BoardGeometry) -> np.ndarray | None:
+    """(n, 2) sub-pixel inner corners in OpenCV order, or ``None`` where the board is not found."""
+    import cv2
+
+    ok, corners = cv2.findChessboardCornersSB(_to_u8(image), tuple(board.pattern_size),
+                                              flags=cv2.CALIB_CB_ACCURACY)
+    return corners.reshape(-1, 2).astype(np.float64) if ok else None
+
+
+def calibrate_camera(images, board: BoardGeometry, *, max_image_rms_px: float = 0.5,
+                     outlier_factor: float = 3.0, fix_k3: bool = True,
+                     min_images: int = 4) -> CameraCalibration:
+    """Zhang calibration of the camera from images of a chessboard.
+
+    Raises
+    ------
+    ValueError
+        Fewer than ``min_images`` usable images, or inconsistent image sizes.
+    """
+    import cv2
+
+    images = list(images)
+    if not images:
+        raise ValueError("calibrate_camera: no images")
+    shapes = {np.asarray(im).shape for im in images}
+    if len(shapes) != 1 or len(next(iter(shapes))) != 2:
+        raise ValueError(f"calibrate_camera: images must be 2-D and of one size, got {sorted(shapes)}")
+    h, w = next(iter(shapes))
+    found = [detect_corners(im, board) for im in images]
+    used = np.array([c is not None for c in found])
+    obj = board.object_points()
+    flags = cv2.CALIB_FIX_K3 if fix_k3 else 0
+    crit = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-12)
+    for _ in range(3):  # calibrate, drop outlier images, calibrate again
+        idx = np.flatnonzero(used)
+        if len(idx) < min_images:
+            raise ValueError(f"calibrate_camera: only {len(idx)} usable images, need {min_images}")
+        pts = [found[i].astype(np.float32) for i in idx]
+        rms, K, dist, rvecs, tvecs, std_i, _, per_view = cv2.calibrateCameraExtended(
+            [obj] * len(idx), pts, (w, h), None, None, flags=flags, criteria=crit)
+        per_view = per_view.ravel()
+        bad = (per_view > max_image_rms_px) | (per_view > outlier_factor * np.median(per_view))
+        if not bad.any():
+            break
+        used[idx[bad]] = False
+    return CameraCalibration(K=K, dist=dist.ravel()[:5], image_size=(w, h), rms_px=float(rms),
+                             per_image_rms_px=per_view, used=used, std_intrinsics=std_i.ravel(),
+                             rvecs=[r.ravel() for r in rvecs], tvecs=[t.ravel() for t in tvecs],
+                             corners=pts)

@@ -1,0 +1,69 @@
+"""Zhang calibration (OpenCV) from rendered chessboard images against the true camera.
+
+Measured (12 poses, 9×7 squares of 5 mm, 1280×1024, pinhole, no noise): reprojection RMS
+0.11 px, fx −0.035 %, fy −0.059 %, cx +0.08 px, cy +1.8 px. Issue 5 asks for 0.05 %, 0.2 px
+and 0.05 px: not reached yet (corner localisation ~0.1 px is the limit); these tolerances
+guard the current figures.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from lts360.recon.camera_calibration import BoardGeometry, calibrate_camera
+
+mi = pytest.importorskip("mitsuba", reason="rendering the calibration images needs Mitsuba 3")
+pytest.importorskip("cv2", reason="calibration needs OpenCV")
+
+
+def _poses(rig, board):
+    from scipy.spatial.transform import Rotation
+
+    R_cw = rig.camera.R.T
+    C = rig.camera.center_mm
+    flip = np.diag([1.0, -1.0, -1.0])  # board z towards the camera
+    out, k = [], 0
+    for dx in (-40, -15, 15, 40):
+        for dy in (-30, 0, 30):
+            k += 1
+            tilt = Rotation.from_euler("xy", [(-1) ** k * 25, (1 if dx <= 0 else -1) * 25],
+                                       degrees=True).as_matrix()
+            R_wb = R_cw @ flip @ tilt
+            w, h = board.size_mm
+            T = np.eye(4)
+            T[:3, :3] = R_wb
+            T[:3, 3] = R_cw @ np.array([dx, dy, 170.0]) + C - R_wb @ np.array(
+                [w / 2 - board.margin_mm, h / 2 - board.margin_mm, 0.0])
+            out.append(dataclasses.replace(board, T_world_board=T))
+    return out
+
+
+def test_zhang_calibration_recovers_the_rendered_camera():
+    if "llvm_ad_mono" not in mi.variants():
+        pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
+    mi.set_variant("llvm_ad_mono")
+    from lts360.scenes.rig_io import load_rig
+    from lts360.scenes.targets import Chessboard
+    from lts360.simulator.render import render_radiance
+    from lts360.simulator.scene import SceneSpec
+
+    rig = dataclasses.replace(load_rig("paper"), mirrors=())  # the board seen directly only
+    board = Chessboard(squares_x=9, squares_y=7, square_mm=5.0, margin_mm=5.0)
+    images = [render_radiance(SceneSpec(rig, (), ambient="bright", targets=(b,)), spp=8,
+                              thin_lens=False, laser_on=False).radiance_W_m2_sr
+              for b in _poses(rig, board)]
+    res = calibrate_camera(images, BoardGeometry((8, 6), 5.0))
+    K = rig.camera.K
+    assert res.used.sum() >= 10
+    assert res.rms_px < 0.2
+    assert abs(res.K[0, 0] / K[0, 0] - 1) < 2e-3 and abs(res.K[1, 1] / K[1, 1] - 1) < 2e-3
+    assert np.all(np.abs(res.K[:2, 2] - K[:2, 2]) < 4.0)
+    assert np.all(np.abs(res.dist[:2]) < 0.02)  # the true lens has no distortion
+
+
+def test_too_few_images_is_a_clear_error():
+    with pytest.raises(ValueError, match="usable images"):
+        calibrate_camera([np.zeros((64, 64), np.uint8)] * 3, BoardGeometry((8, 6), 5.0))
