@@ -75,9 +75,10 @@ def detect_real_and_virtual(image, board: BoardGeometry, K, dist, *,
     """Find the real and the virtual board in one image and put the virtual corners in the
     physical corners' order.  ``None`` when either board is not found.
 
-    The brighter, larger detection is not assumed to be the real one: of the two detections,
-    the real board is the one whose corners, in OpenCV order, have the handedness of the
-    board (positive triple product of the PnP pose).
+    The first detection is not assumed to be the real board: the real one is the detection
+    whose pose (PnP with the board's own coordinates) shows the printed side to the camera —
+    OpenCV orders the corners of a mirror-reversed board so that such a pose sees it from
+    behind.
     """
     import cv2
 
@@ -117,9 +118,19 @@ def detect_real_and_virtual(image, board: BoardGeometry, K, dist, *,
                 best = (dev, v)
         return best
 
-    a = score(first, second)
-    b = score(second, first)
-    real, virt = (first, a[1]) if a[0] <= b[0] else (second, b[1])
+    # Which detection is the real board: the camera lies on the real board's side of the
+    # mirror. With u = X_real − X_virtual (along the mirror normal, towards the real side) and
+    # M a midpoint on the mirror, the camera centre (the origin) needs u · (0 − M) > 0; a
+    # swapped labelling flips u and fails the test.
+    dev, virt = score(first, second)
+    Xr = _transform(obj, *_pose(obj, first, K, dist))
+    Xv = _transform(obj_m, *_pose(obj_m, virt, K, dist))
+    u = (Xr - Xv).mean(axis=0)
+    M = ((Xr + Xv) / 2.0).mean(axis=0)
+    if float(u @ -M) > 0:
+        real = first
+    else:
+        real, virt = second, score(second, first)[1]
     return MirrorObservation(real_px=real, virtual_px=virt)
 
 
