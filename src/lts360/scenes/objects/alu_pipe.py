@@ -18,7 +18,7 @@ import numpy as np
 from lts360.scenes.materials import get_material
 from lts360.scenes.objects._params import check_less, check_range
 from lts360.scenes.objects.base import Placement, SceneObject
-from lts360.scenes.objects.mesher import n_theta_for_tolerance, star_mesh, z_grid
+from lts360.scenes.objects.mesher import n_theta_for_tolerance, star_mesh, zoned_z_grid
 from lts360.scenes.objects.registry import ObjectType, canonical_spec, register
 
 NAME = "alu-pipe"
@@ -153,8 +153,7 @@ class AluPipeParams:
         psi = np.arange(n_theta) * (2.0 * np.pi / n_theta)
         h, zone = self.length_mm / 2.0, ZONE_HALF_MM
         coarse = _COARSE_FACTOR * dz
-        z = np.unique(np.concatenate([z_grid(-h, -zone, coarse), z_grid(-zone, zone, dz),
-                                      z_grid(zone, h, coarse)]))
+        z = zoned_z_grid(h, zone, dz, _COARSE_FACTOR)
         mesh = star_mesh(self.radius, psi, z, radius_in=self.inner_radius)
         return SceneObject(
             name=NAME, spec=canonical_spec(NAME, self, placement), params=self.__dict__.copy(),

@@ -13,7 +13,7 @@ import math
 import numpy as np
 import trimesh
 
-__all__ = ["n_theta_for_tolerance", "z_grid", "star_mesh"]
+__all__ = ["n_theta_for_tolerance", "z_grid", "zoned_z_grid", "star_mesh"]
 
 
 def n_theta_for_tolerance(radius_mm: float, tolerance_mm: float, *, minimum: int = 16) -> int:
@@ -40,6 +40,16 @@ def z_grid(z_min_mm: float, z_max_mm: float, step_mm: float, *,
         parts.append(np.linspace(a, b, n + 1)[:-1])
     parts.append([knots[-1]])
     return np.concatenate(parts)
+
+
+def zoned_z_grid(half_length_mm: float, zone_half_mm: float, step_mm: float,
+                 coarse_factor: float) -> np.ndarray:
+    """Axial grid of a part centred on z = 0: spacing ``step_mm`` inside the measured zone
+    ``|z| <= zone_half_mm`` and ``coarse_factor × step_mm`` outside it, both zone limits exact."""
+    coarse = coarse_factor * step_mm
+    return np.unique(np.concatenate([z_grid(-half_length_mm, -zone_half_mm, coarse),
+                                     z_grid(-zone_half_mm, zone_half_mm, step_mm),
+                                     z_grid(zone_half_mm, half_length_mm, coarse)]))
 
 
 def _ring_faces(n_theta: int, n_z: int, offset: int, outward: bool) -> np.ndarray:
