@@ -104,8 +104,12 @@ def detect_corners(image, board: BoardGeometry) -> np.ndarray | None:
 
 def calibrate_camera(images, board: BoardGeometry, *, max_image_rms_px: float = 0.5,
                      outlier_factor: float = 3.0, fix_k3: bool = True,
-                     min_images: int = 4) -> CameraCalibration:
+                     zero_tangent: bool = False, min_images: int = 4) -> CameraCalibration:
     """Zhang calibration of the camera from images of a chessboard.
+
+    ``fix_k3`` keeps k3 = 0 and ``zero_tangent`` keeps p1 = p2 = 0 (OpenCV's
+    ``CALIB_FIX_K3``, ``CALIB_ZERO_TANGENT_DIST``): fewer parameters for a lens that does not
+    need them — the tangential terms trade off against the principal point.
 
     Raises
     ------
@@ -124,7 +128,7 @@ def calibrate_camera(images, board: BoardGeometry, *, max_image_rms_px: float = 
     found = [detect_corners(im, board) for im in images]
     used = np.array([c is not None for c in found])
     obj = board.object_points()
-    flags = cv2.CALIB_FIX_K3 if fix_k3 else 0
+    flags = (cv2.CALIB_FIX_K3 if fix_k3 else 0) | (cv2.CALIB_ZERO_TANGENT_DIST if zero_tangent else 0)
     crit = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-12)
     for _ in range(3):  # calibrate, drop outlier images, calibrate again
         idx = np.flatnonzero(used)

@@ -28,7 +28,7 @@ from lts360.geometry.fit import fit_plane
 from lts360.recon.camera_calibration import BoardGeometry, _to_u8
 
 __all__ = ["MirrorObservation", "MirrorEstimate", "detect_real_and_virtual", "mirror_from_midpoints",
-           "refine_mirror"]
+           "refine_mirror", "robust_refine_mirror", "per_image_rms"]
 
 
 @dataclass(frozen=True)
@@ -166,6 +166,40 @@ def mirror_from_midpoints(observations, board: BoardGeometry, K, dist) -> Mirror
     n /= np.linalg.norm(n)
     d = float(np.mean([p[1] for p in planes]))
     return MirrorEstimate(normal=n, d_mm=d, residuals=np.concatenate([p[2] for p in planes]))
+
+
+def per_image_rms(estimate: MirrorEstimate, n_images: int) -> np.ndarray:
+    """RMS reprojection error (px) of each image of a :func:`refine_mirror` fit."""
+    r = np.asarray(estimate.residuals).reshape(n_images, -1)
+    return np.sqrt(np.mean(r**2, axis=1))
+
+
+def robust_refine_mirror(observations, board: BoardGeometry, K, dist, *,
+                         max_image_rms_px: float = 0.15, outlier_factor: float = 2.5,
+                         min_images: int = 2) -> tuple[MirrorEstimate, np.ndarray]:
+    """:func:`refine_mirror`, then images whose RMS exceeds ``max_image_rms_px`` or
+    ``outlier_factor`` × the median are discarded and the fit repeated (paper §4.2: "images
+    with large reprojection errors are discarded").  Returns the estimate and the mask of
+    the images kept.
+
+    Measured on rendered images (64 spp): most images fit to 0.035–0.06 px; obliquely seen
+    boards reach 0.1–0.3 px and moved the plane by up to 1 mm on their own.
+    """
+    keep = np.ones(len(observations), bool)
+    est = None
+    for _ in range(3):
+        obs = [o for o, k in zip(observations, keep) if k]
+        if len(obs) < min_images:
+            raise ValueError(f"mirror calibration: {len(obs)} image(s) left after discarding "
+                             f"outliers, need {min_images}")
+        est = refine_mirror(obs, board, K, dist)
+        rms = per_image_rms(est, len(obs))
+        bad = (rms > max_image_rms_px) | (rms > outlier_factor * np.median(rms))
+        if not bad.any():
+            break
+        idx = np.flatnonzero(keep)
+        keep[idx[bad]] = False
+    return est, keep
 
 
 def _mirror_points(X, n, d):

@@ -77,7 +77,7 @@ def _segment_blocked_by_mirrors(a: np.ndarray, b: np.ndarray, mirrors, skip: set
         crosses = (da * db) < 0
         with np.errstate(divide="ignore", invalid="ignore"):
             t = da / (da - db)
-        p = a + t[:, None] * (b - a)
+            p = a + t[:, None] * (b - a)  # NaN where the segment lies in the plane
         q = p - m.center_mm
         inside = (np.abs(q @ m.u_axis) <= m.width_mm / 2) & (np.abs(q @ m.v_axis) <= m.height_mm / 2)
         blocked |= crosses & inside

@@ -23,7 +23,8 @@ from lts360.simulator.render import RenderResult, render_radiance
 from lts360.simulator.scene import SceneSpec
 from lts360.simulator.materials import material_to_bsdf
 
-__all__ = ["DEFAULT_SPP", "NOISE_MODES", "Frame", "simulate_frame", "write_frame", "stage_transform"]
+__all__ = ["DEFAULT_SPP", "NOISE_MODES", "Frame", "simulate_frame", "write_frame", "stage_transform",
+           "sensor_image"]
 
 DEFAULT_SPP = 16
 NOISE_MODES = ("none", "realistic")
@@ -75,9 +76,6 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
         under the stripe: repeated frames of a static object share it (same speckle seed),
         a moved or replaced object gets a new one.
     """
-    from lts360.simulator import sensor as sensor_mod
-    from lts360.simulator.speckle import speckle_pattern
-
     if noise not in NOISE_MODES:
         raise ValueError(f"noise must be one of {', '.join(NOISE_MODES)}, got {noise!r}")
     T_stage = stage_transform(z_mm)
@@ -87,34 +85,11 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
     spec = SceneSpec(rig, meshes, ambient=ambient, background_z_mm=background_z_mm)
     res = render_radiance(spec, spp=spp, seed=seed, scale=scale, max_bounces=max_bounces,
                           thin_lens=thin_lens, laser_on=laser_on)
-    cam = rig.camera
+    image, exposure_time_s, magnification = sensor_image(
+        rig, res, noise=noise, seed=seed, speckle_seed=speckle_seed, scale=scale,
+        exposure_time_s=exposure_time_s, exposure_fraction=exposure_fraction)
     sens = rig.sensor
-    pitch_um = cam.pixel_pitch_um / scale
-    # Lateral magnification at the focus distance: the working f-number is N (1 + m).
-    magnification = cam.focal_length_mm / (cam.focus_distance_mm - cam.focal_length_mm)
-    seeds = np.random.SeedSequence([int(seed), 0x1A5E]).spawn(2)
-    if speckle_seed is not None:
-        seeds[0] = np.random.SeedSequence([int(speckle_seed), 0x5BEC])
-    radiance = res.radiance_W_m2_sr.astype(np.float64)
-    if noise == "realistic" and res.laser_W_m2_sr.any():
-        pattern = speckle_pattern(radiance.shape, pixel_pitch_um=pitch_um,
-                                  wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
-                                  magnification=magnification, rng=np.random.default_rng(seeds[0]))
-        radiance = radiance + res.laser_W_m2_sr * (pattern - 1.0)
-    if exposure_time_s is None:
-        # The brightest stripe pixels (99.9th percentile of the laser-lit pixels, robust to a
-        # few glints) at `exposure_fraction` of full scale; without laser light, the whole image.
-        lit = res.laser_W_m2_sr > 0
-        exposure_time_s = sensor_mod.auto_exposure(
-            res.radiance_W_m2_sr, sens, wavelength_nm=rig.laser.wavelength_nm,
-            f_number=cam.f_number, pixel_pitch_um=pitch_um, target_fraction=exposure_fraction,
-            percentile=99.9, mask=lit if lit.any() else None, magnification=magnification)
-    electrons = sensor_mod.radiance_to_electrons_mean(
-        radiance, wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
-        pixel_pitch_um=pitch_um, exposure_time_s=exposure_time_s,
-        quantum_efficiency=sens.quantum_efficiency, magnification=magnification)
-    image = sensor_mod.expose(electrons, sens, rng=np.random.default_rng(seeds[1]),
-                              noise=noise == "realistic", exposure_time_s=exposure_time_s)
+    radiance = res.radiance_W_m2_sr
     truth = rig_truth(rig, res.K, (radiance.shape[1], radiance.shape[0]))
     truth.update({
         "object": {"spec": obj.spec, "name": obj.name, "material": obj.material.name,
@@ -131,6 +106,67 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
     })
     return Frame(image=image, render=res, exposure_time_s=float(exposure_time_s), truth=truth,
                  mesh_world=mesh)
+
+
+def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int = 0,
+                 speckle_seed: int | None = None, scale: float = 1.0,
+                 exposure_time_s: float | None = None,
+                 exposure_fraction: float = 0.8) -> tuple[np.ndarray, float, float]:
+    """The camera's digital image of a rendered radiance image (speckle + EMVA 1288 sensor).
+
+    Parameters
+    ----------
+    rig : Rig
+        Supplies the optics (f-number, focus, pixel pitch), the laser wavelength and the sensor.
+    res : RenderResult
+        Radiance at the lens and the laser's share of it.
+    noise : {"none", "realistic"}
+        ``none``: the expected digital value (quantised, clipped); ``realistic``: temporal and
+        fixed-pattern sensor noise and speckle on the laser's share of the light.
+    seed, speckle_seed : int
+        Temporal noise (and speckle, unless ``speckle_seed`` is given).
+    exposure_time_s : float, optional
+        Fixed exposure; by default the brightest laser-lit pixels (99.9th percentile; all
+        pixels when nothing is laser-lit) land at ``exposure_fraction`` of full scale.
+
+    Returns
+    -------
+    image : (h, w) uint8 or uint16
+    exposure_time_s : float
+    magnification : float
+        Lateral magnification at the focus distance (the working f-number is N (1 + m)).
+    """
+    from lts360.simulator import sensor as sensor_mod
+    from lts360.simulator.speckle import speckle_pattern
+
+    if noise not in NOISE_MODES:
+        raise ValueError(f"noise must be one of {', '.join(NOISE_MODES)}, got {noise!r}")
+    cam = rig.camera
+    sens = rig.sensor
+    pitch_um = cam.pixel_pitch_um / scale
+    magnification = cam.focal_length_mm / (cam.focus_distance_mm - cam.focal_length_mm)
+    seeds = np.random.SeedSequence([int(seed), 0x1A5E]).spawn(2)
+    if speckle_seed is not None:
+        seeds[0] = np.random.SeedSequence([int(speckle_seed), 0x5BEC])
+    radiance = res.radiance_W_m2_sr.astype(np.float64)
+    if noise == "realistic" and res.laser_W_m2_sr.any():
+        pattern = speckle_pattern(radiance.shape, pixel_pitch_um=pitch_um,
+                                  wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
+                                  magnification=magnification, rng=np.random.default_rng(seeds[0]))
+        radiance = radiance + res.laser_W_m2_sr * (pattern - 1.0)
+    if exposure_time_s is None:
+        lit = res.laser_W_m2_sr > 0
+        exposure_time_s = sensor_mod.auto_exposure(
+            res.radiance_W_m2_sr, sens, wavelength_nm=rig.laser.wavelength_nm,
+            f_number=cam.f_number, pixel_pitch_um=pitch_um, target_fraction=exposure_fraction,
+            percentile=99.9, mask=lit if lit.any() else None, magnification=magnification)
+    electrons = sensor_mod.radiance_to_electrons_mean(
+        radiance, wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
+        pixel_pitch_um=pitch_um, exposure_time_s=exposure_time_s,
+        quantum_efficiency=sens.quantum_efficiency, magnification=magnification)
+    image = sensor_mod.expose(electrons, sens, rng=np.random.default_rng(seeds[1]),
+                              noise=noise == "realistic", exposure_time_s=exposure_time_s)
+    return image, float(exposure_time_s), float(magnification)
 
 
 def write_frame(out_dir, frame: Frame) -> Path:

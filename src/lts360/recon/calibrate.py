@@ -1,0 +1,329 @@
+"""The whole rig calibration from a folder of chessboard images (paper §4.2–4.3).
+
+Input: a folder with the images and ``manifest.json``::
+
+    {"board": {"pattern_size": [6, 5], "square_mm": 2.0},
+     "camera_board": {"pattern_size": [8, 6], "square_mm": 8.0},
+     "design": {"mirror_corner_distance_mm": 60.0, "mirror_width_mm": 105.0,
+                "mirror_height_mm": 80.0, "mirror_center_z_mm": 20.0},
+     "shots": [{"name": "camera-00", "kind": "camera", "image": "camera-00.png"},
+               {"name": "mirror-left-00", "kind": "mirror", "mirror": "left",
+                "image": "mirror-left-00.png"},
+               {"name": "laser-00", "kind": "laser", "image_board": "laser-00-board.png",
+                "image_on": "laser-00-on.png", "image_off": "laser-00-off.png"}]}
+
+``board`` is the small target of the mirror and laser shots; ``camera_board`` (optional,
+default ``board``) the one of the ``camera`` shots.
+
+Steps: (1) Zhang's camera calibration on the ``camera`` shots; (2) per mirror, the real and the
+virtual board in each ``mirror`` shot → the paper's midpoint plane and a joint least-squares
+plane (the one kept); (3) the laser plane from the line on the board; (4) the measurement
+frame: z along the laser normal, origin where the nominal object axis meets the sheet — the
+axis is parallel to the mirrors' common edge, ``mirror_corner_distance_mm`` from it on the
+bisector of the mirrors (the rig's design; a lab measures it once) — and θ = 0 along the
+mirrors' left-to-right direction.  Uncertainties: OpenCV's intrinsic standard deviations,
+and for every plane the larger of its least-squares covariance and a jackknife over the
+poses (pose errors are shared by all points of a pose, which least squares does not see).
+
+Nothing here reads ground truth.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lts360.recon.calibration import Calibration, MirrorPlane, make_T_cam_meas
+from lts360.recon.camera_calibration import BoardGeometry, CameraCalibration, calibrate_camera
+from lts360.recon.laser_calibration import (LaserLine, LaserPlaneEstimate, fit_laser_plane,
+                                            laser_line_points)
+from lts360.recon.mirror_calibration import (MirrorEstimate, MirrorObservation,
+                                             detect_real_and_virtual, mirror_from_midpoints,
+                                             refine_mirror, robust_refine_mirror)
+from lts360.recon.uncertainty import (CAMERA_STD_NAMES, jackknife_covariance, plane_offset_abd)
+
+__all__ = ["CalibrationImages", "read_calibration_images", "calibrate_rig",
+           "measurement_frame_from_mirrors", "RigCalibrationResult"]
+
+
+@dataclass(frozen=True)
+class CalibrationImages:
+    """A manifest read from disk (paths resolved) — see the module docstring."""
+
+    root: Path
+    board: BoardGeometry
+    camera_board: BoardGeometry
+    design: dict
+    shots: tuple[dict, ...]
+
+
+@dataclass(frozen=True, eq=False)
+class RigCalibrationResult:
+    """The calibration and everything the report needs."""
+
+    calibration: Calibration
+    camera: CameraCalibration
+    camera_images: tuple[str, ...]
+    mirror_observations: dict
+    mirror_midpoint: dict
+    mirror_lsq: dict
+    laser_lines: dict
+    laser: LaserPlaneEstimate
+    skipped: dict
+
+
+def read_calibration_images(folder) -> CalibrationImages:
+    """Read ``folder/manifest.json``.
+
+    Raises
+    ------
+    ValueError
+        Missing manifest or field, unknown shot kind, missing image file.
+    """
+    root = Path(folder)
+    path = root / "manifest.json"
+    if not path.is_file():
+        raise ValueError(f"--images: {str(root)!r} has no manifest.json (board geometry and shots)")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"--images: manifest.json is not valid JSON (line {exc.lineno}: "
+                         f"{exc.msg})") from None
+    try:
+        b = data["board"]
+        board = BoardGeometry(tuple(int(v) for v in b["pattern_size"]), float(b["square_mm"]))
+        cb = data.get("camera_board") or b
+        camera_board = BoardGeometry(tuple(int(v) for v in cb["pattern_size"]),
+                                     float(cb["square_mm"]))
+        shots = tuple(data["shots"])
+    except (KeyError, TypeError) as exc:
+        raise ValueError(f"manifest.json: missing or invalid field {exc}") from None
+    for s in shots:
+        kind = s.get("kind")
+        keys = {"camera": ("image",), "mirror": ("image", "mirror"),
+                "laser": ("image_board", "image_on", "image_off")}.get(kind)
+        if keys is None:
+            raise ValueError(f"manifest.json: shot {s.get('name')!r} has kind {kind!r}; "
+                             "expected camera, mirror or laser")
+        for k in keys:
+            if k not in s:
+                raise ValueError(f"manifest.json: shot {s.get('name')!r} lacks {k!r}")
+            if k.startswith("image") and not (root / s[k]).is_file():
+                raise ValueError(f"manifest.json: image {s[k]!r} of shot {s.get('name')!r} "
+                                 "is missing")
+    return CalibrationImages(root=root, board=board, camera_board=camera_board, design=dict(data.get("design") or {}),
+                             shots=shots)
+
+
+def _read(path: Path) -> np.ndarray:
+    import cv2
+
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise ValueError(f"cannot read image {str(path)!r}")
+    if img.ndim == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+    return img
+
+
+def measurement_frame_from_mirrors(mirrors: dict[str, MirrorPlane], laser_plane,
+                                   corner_distance_mm: float) -> np.ndarray:
+    """``T_cam_meas`` from two mirror planes, the laser plane and the axis-to-corner distance.
+
+    Origin: the mirrors' common edge meets the laser plane at ``P``; the axis lies at
+    ``corner_distance_mm`` from ``P`` along the mirrors' bisector (towards the camera side),
+    within the laser plane.  z: the laser normal, on the camera's side.  y: from the axis
+    towards the mirror corner; x = y × z (from the ``left`` towards the ``right`` mirror).
+    """
+    if set(mirrors) != {"left", "right"}:
+        raise ValueError(f"the measurement frame needs a 'left' and a 'right' mirror, got "
+                         f"{sorted(mirrors)}")
+    n_l, d_l = mirrors["left"].plane
+    n_r, d_r = mirrors["right"].plane
+    n_z, d_z = np.asarray(laser_plane[0], float), float(laser_plane[1])
+    if d_z > 0:
+        n_z, d_z = -n_z, -d_z
+    A = np.vstack([n_l, n_r, n_z])
+    P = np.linalg.solve(A, [d_l, d_r, d_z])
+    b = n_l + n_r  # both normals face the camera side: their sum points from the edge outwards
+    b -= (b @ n_z) * n_z
+    b /= np.linalg.norm(b)
+    origin = P + corner_distance_mm * b
+    z = n_z  # d_z < 0: the camera (the origin) is on the +n_z side
+    y = -b
+    x = np.cross(y, z)
+    return make_T_cam_meas((z, d_z), origin, x)
+
+
+def _mirror_corners(mirror: MirrorPlane, other: MirrorPlane, T_cam_meas: np.ndarray,
+                    design: dict) -> np.ndarray | None:
+    """The mirror's rectangle from the design sizes, on the calibrated plane."""
+    try:
+        w = float(design["mirror_width_mm"])
+        h = float(design["mirror_height_mm"])
+        zc = float(design["mirror_center_z_mm"])
+    except (KeyError, TypeError, ValueError):
+        return None
+    R, t = T_cam_meas[:3, :3], T_cam_meas[:3, 3]
+    z = R[:, 2]
+    edge = np.cross(mirror.n, other.n)
+    edge /= np.linalg.norm(edge)
+    if edge @ z < 0:
+        edge = -edge
+    # A point of the common edge at measurement height zc.
+    A = np.vstack([mirror.n, other.n, z])
+    P = np.linalg.solve(A, [mirror.d_mm, other.d_mm, z @ t + zc])
+    u = np.cross(edge, mirror.n)  # in the mirror plane, across the edge
+    origin = t
+    if u @ (origin - P) < 0:
+        u = -u
+    c = [P + a * u + e * edge for a, e in ((0, -h / 2), (w, -h / 2), (w, h / 2), (0, h / 2))]
+    c = np.array(c)
+    return c - (c @ mirror.n - mirror.d_mm)[:, None] * mirror.n
+
+
+def _plane_unc(n, d, lsq_cov, groups_abd) -> dict:
+    out = {"cov_abd_lsq": np.asarray(lsq_cov).tolist()}
+    cov = np.asarray(lsq_cov, dtype=float)
+    if len(groups_abd) >= 3:
+        jk = jackknife_covariance(groups_abd)
+        out["cov_abd_jackknife"] = jk.tolist()
+        # Keep the larger: compare the total variances of the normal and the offset.
+        if np.trace(jk[:2, :2]) + jk[2, 2] > np.trace(cov[:2, :2]) + cov[2, 2]:
+            cov = jk
+    out["cov_abd"] = cov.tolist()
+    out["std_angle_deg"] = float(np.degrees(np.sqrt(np.trace(cov[:2, :2]))))
+    out["std_offset_mm"] = float(np.sqrt(cov[2, 2]))
+    return out
+
+
+def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
+                  progress=None) -> RigCalibrationResult:
+    """Calibrate camera, mirrors and laser plane from the manifest's images.
+
+    ``tangential``: estimate the tangential distortion p1, p2 too.  Off by default — k1, k2
+    only, as is usual for a fixed-focal machine-vision lens: p1, p2 trade off against the
+    principal point (measured on rendered images of a lens without distortion, 24 poses:
+    cx/cy errors 0.41/0.58 px with them, 0.03/0.37 px without).
+
+    Raises
+    ------
+    ValueError
+        Too few usable images for a component (the message says which and why).
+    """
+    say = progress or (lambda msg: None)
+    board = images.board
+    direct, names = [], []
+    for s in images.shots:
+        if s["kind"] == "camera":
+            direct.append(_read(images.root / s["image"]))
+            names.append(s["name"])
+    say(f"camera: Zhang's method on {len(direct)} images")
+    cam = calibrate_camera(direct, images.camera_board, zero_tangent=not tangential)
+    K, dist = cam.K, cam.dist
+    used_names = tuple(n for n, u in zip(names, cam.used) if u)
+
+    skipped: dict[str, str] = {n: "board not found or reprojection outlier"
+                               for n, u in zip(names, cam.used) if not u}
+    obs: dict[str, list[MirrorObservation]] = {}
+    obs_names: dict[str, list[str]] = {}
+    for s in images.shots:
+        if s["kind"] != "mirror":
+            continue
+        ob = detect_real_and_virtual(_read(images.root / s["image"]), board, K, dist)
+        if ob is None:
+            skipped[s["name"]] = "real and virtual board not both found"
+            continue
+        obs.setdefault(s["mirror"], []).append(ob)
+        obs_names.setdefault(s["mirror"], []).append(s["name"])
+    if not obs:
+        raise ValueError("mirror calibration: no image shows a board directly and in a mirror")
+    mids, lsqs, planes = {}, {}, {}
+    for name in list(obs):
+        lsq, keep = robust_refine_mirror(obs[name], board, K, dist)
+        for nm, k in zip(obs_names[name], keep):
+            if not k:
+                skipped[nm] = "mirror fit: large reprojection error, discarded"
+        obs[name] = [o for o, k in zip(obs[name], keep) if k]
+        obs_names[name] = [n for n, k in zip(obs_names[name], keep) if k]
+        ob_list = obs[name]
+        say(f"mirror {name}: {len(ob_list)} images kept")
+        mid = mirror_from_midpoints(ob_list, board, K, dist)
+        groups = []
+        if len(ob_list) >= 3:
+            for i in range(len(ob_list)):
+                sub = ob_list[:i] + ob_list[i + 1:]
+                e = refine_mirror(sub, board, K, dist, initial=lsq)
+                groups.append(plane_offset_abd(lsq.normal, lsq.d_mm, e.normal, e.d_mm))
+        mids[name], lsqs[name] = mid, lsq
+        planes[name] = (lsq, groups)
+
+    lines: dict[str, LaserLine] = {}
+    for s in images.shots:
+        if s["kind"] != "laser":
+            continue
+        try:
+            lines[s["name"]] = laser_line_points(_read(images.root / s["image_on"]),
+                                                 _read(images.root / s["image_off"]),
+                                                 _read(images.root / s["image_board"]),
+                                                 board, K, dist)
+        except ValueError as exc:
+            skipped[s["name"]] = str(exc)
+    say(f"laser plane: {len(lines)} poses")
+    laser = fit_laser_plane(list(lines.values()))
+    laser_groups = []
+    if len(lines) >= 3:
+        keys = list(lines)
+        for i in range(len(keys)):
+            sub = [lines[k] for j, k in enumerate(keys) if j != i]
+            e = fit_laser_plane(sub)
+            laser_groups.append(plane_offset_abd(laser.normal, laser.d_mm, e.normal, e.d_mm))
+
+    mirror_planes = {name: MirrorPlane(name=name, n=lsq.normal, d_mm=lsq.d_mm)
+                     for name, (lsq, _) in planes.items()}
+    dist_mm = images.design.get("mirror_corner_distance_mm")
+    if dist_mm is None:
+        raise ValueError("manifest.json: design.mirror_corner_distance_mm is needed to place "
+                         "the measurement frame (the nominal axis relative to the mirrors)")
+    T = measurement_frame_from_mirrors(mirror_planes, (laser.normal, laser.d_mm), float(dist_mm))
+    if {"left", "right"} <= set(mirror_planes):
+        l, r = mirror_planes["left"], mirror_planes["right"]
+        mirror_planes = {
+            "left": MirrorPlane("left", l.n, l.d_mm, _mirror_corners(l, r, T, images.design)),
+            "right": MirrorPlane("right", r.n, r.d_mm, _mirror_corners(r, l, T, images.design)),
+        }
+    std = dict(zip(CAMERA_STD_NAMES, (float(v) for v in cam.std_intrinsics[:9])))
+    unc = {
+        "camera": {"std": std, "rms_px": cam.rms_px, "n_images": int(cam.used.sum())},
+        "mirrors": {name: _plane_unc(lsq.normal, lsq.d_mm, _lsq_abd_cov(lsq), g)
+                    for name, (lsq, g) in planes.items()},
+        "laser_plane": _plane_unc(laser.normal, laser.d_mm, laser.covariance, laser_groups),
+        "parameterisation": "planes: n' = normalise(n + a e1 + b e2), d' = d + delta; "
+                            "lts360.recon.uncertainty.tangent_basis(n) gives e1, e2",
+    }
+    cal = Calibration(image_size=cam.image_size, K=K, dist=dist,
+                      mirrors=tuple(mirror_planes[k] for k in sorted(mirror_planes)),
+                      laser_plane=(laser.normal, laser.d_mm), T_cam_meas=T, uncertainty=unc)
+    return RigCalibrationResult(calibration=cal, camera=cam, camera_images=used_names,
+                                mirror_observations={k: (obs_names[k], v) for k, v in obs.items()},
+                                mirror_midpoint=mids, mirror_lsq=lsqs, laser_lines=lines,
+                                laser=laser, skipped=skipped)
+
+
+def _lsq_abd_cov(est: MirrorEstimate) -> np.ndarray:
+    """The (θ, φ, d) covariance of :func:`refine_mirror` in the (a, b, δ) parameterisation."""
+    if est.covariance is None:
+        return np.full((3, 3), np.nan)
+    from lts360.recon.uncertainty import tangent_basis
+
+    n = est.normal
+    th, ph = np.arccos(np.clip(n[2], -1, 1)), np.arctan2(n[1], n[0])
+    dn_dth = np.array([np.cos(th) * np.cos(ph), np.cos(th) * np.sin(ph), -np.sin(th)])
+    dn_dph = np.array([-np.sin(th) * np.sin(ph), np.sin(th) * np.cos(ph), 0.0])
+    e1, e2 = tangent_basis(n)
+    # refine_mirror may have flipped (n, d); the flip changes signs only, not variances.
+    J = np.array([[dn_dth @ e1, dn_dph @ e1, 0.0], [dn_dth @ e2, dn_dph @ e2, 0.0], [0, 0, 1.0]])
+    return J @ est.covariance @ J.T

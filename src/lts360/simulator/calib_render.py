@@ -1,0 +1,109 @@
+"""Render the planned calibration images (paper §4.2–4.3) and write them as a real rig would
+deliver them: PNG files and a small manifest of the board geometry and of what each image
+shows — nothing more (the true rig and board poses go to a separate ``truth.json`` that the
+calibration never reads).
+
+Camera and mirror shots: the board under bright ambient light, laser off, auto-exposed on
+the whole image.  Laser shots (paper Fig. 9): the board auto-exposed for its corners, and a
+laser-on and a laser-off image at one shorter exposure set on the laser-lit pixels, so that
+their difference is the laser line.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from lts360.scenes.calib_plan import BoardShot
+from lts360.scenes.rig import Rig
+from lts360.simulator.frame import sensor_image
+from lts360.simulator.io import rig_truth, write_json, write_png
+from lts360.simulator.render import render_radiance
+from lts360.simulator.scene import SceneSpec
+
+__all__ = ["render_calibration_images", "MANIFEST_NAME"]
+
+MANIFEST_NAME = "manifest.json"
+
+
+def _render(rig, board, *, laser_on, spp, seed, thin_lens):
+    spec = SceneSpec(rig, (), ambient="bright", targets=(board,))
+    return render_radiance(spec, spp=spp, seed=seed, thin_lens=thin_lens, laser_on=laser_on)
+
+
+def render_calibration_images(rig: Rig, shots: list[BoardShot], out_dir, *, noise: str = "none",
+                              seed: int = 0, spp: int = 16, thin_lens: bool = True,
+                              progress=None) -> dict:
+    """Render every shot into ``out_dir`` (PNG + ``manifest.json``) and return the manifest.
+
+    Parameters
+    ----------
+    noise : {"none", "realistic"}
+        As :func:`lts360.simulator.frame.sensor_image` (speckle on the laser line only).
+    seed : int
+        Shot ``k`` uses sampler/noise seed ``seed * 1000 + k``.
+    progress : callable, optional
+        Called with each shot's name after it is written.
+
+    Returns
+    -------
+    dict
+        ``manifest`` (what was written to ``out_dir/manifest.json``) and ``truth`` (the true
+        rig as in a frame's ``frame.json`` plus every board's world pose and corners), which
+        is *not* written here: the caller keeps it away from the images.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if not shots:
+        raise ValueError("render_calibration_images: no shots")
+    def geometry(kind):
+        b = next((s.board for s in shots if (s.kind == "camera") == (kind == "camera")), None)
+        return None if b is None else {"pattern_size": list(b.pattern_size),
+                                       "square_mm": b.square_mm}
+
+    design = rig.design
+    manifest = {"format": "lts360-calibration-images", "version": 1,
+                "board": geometry("target"), "camera_board": geometry("camera"),
+                "design": {} if design is None else {
+                    "mirror_corner_distance_mm": design.mirror_corner_distance_mm,
+                    "mirror_width_mm": design.mirror_width_mm,
+                    "mirror_height_mm": design.mirror_height_mm,
+                    "mirror_center_z_mm": design.mirror_center_z_mm},
+                "mirrors": [m.name for m in rig.mirrors], "shots": []}
+    truth_boards = []
+    K = None
+    for k, shot in enumerate(shots):
+        s = int(seed) * 1000 + k
+        entry = {"name": shot.name, "kind": shot.kind}
+        if shot.mirror is not None:
+            entry["mirror"] = shot.mirror
+        if shot.kind == "laser":
+            # Three pictures of one pose: the board exposed for the board (corners, pose), and
+            # laser on / laser off at one exposure set on the line (their difference is the line).
+            on = _render(rig, shot.board, laser_on=True, spp=spp, seed=s, thin_lens=thin_lens)
+            off = _render(rig, shot.board, laser_on=False, spp=spp, seed=s, thin_lens=thin_lens)
+            img_board, _, _ = sensor_image(rig, off, noise=noise, seed=s + 300_000)
+            img_on, t_exp, _ = sensor_image(rig, on, noise=noise, seed=s)
+            img_off, _, _ = sensor_image(rig, off, noise=noise, seed=s + 600_000,
+                                         exposure_time_s=t_exp)
+            for suffix, img in (("board", img_board), ("on", img_on), ("off", img_off)):
+                write_png(out / f"{shot.name}-{suffix}.png", img)
+                entry[f"image_{suffix}"] = f"{shot.name}-{suffix}.png"
+            K = on.K
+        else:
+            res = _render(rig, shot.board, laser_on=False, spp=spp, seed=s, thin_lens=thin_lens)
+            img, _, _ = sensor_image(rig, res, noise=noise, seed=s)
+            write_png(out / f"{shot.name}.png", img)
+            entry["image"] = f"{shot.name}.png"
+            K = res.K
+        manifest["shots"].append(entry)
+        truth_boards.append({"name": shot.name, "T_world_board": shot.board.T_world_board,
+                             "corners_world_mm": shot.board.corners_world_mm()})
+        if progress is not None:
+            progress(shot.name)
+    write_json(out / MANIFEST_NAME, manifest)
+    truth = rig_truth(rig, K, (rig.camera.width_px, rig.camera.height_px))
+    truth.update({"boards": truth_boards, "render": {"noise": noise, "seed": seed, "spp": spp,
+                                                     "thin_lens": thin_lens}})
+    return {"manifest": manifest, "truth": truth}

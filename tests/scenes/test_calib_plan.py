@@ -1,0 +1,68 @@
+"""Calibration pose planning: every planned board is seen as its kind requires."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lts360.scenes.calib_plan import plan_calibration, shot_visibility
+from lts360.scenes.rig_io import load_rig
+from lts360.scenes.targets import Chessboard
+
+
+@pytest.fixture(scope="module")
+def rig():
+    return load_rig("paper")
+
+
+@pytest.fixture(scope="module")
+def shots(rig):
+    return plan_calibration(rig, n_camera=6, n_mirror=2, n_laser=3, seed=4)
+
+
+def test_counts_names_and_kinds(shots):
+    kinds = [s.kind for s in shots]
+    assert kinds.count("camera") == 6 and kinds.count("mirror") == 4 and kinds.count("laser") == 3
+    assert len({s.name for s in shots}) == len(shots)
+    assert {s.mirror for s in shots if s.kind == "mirror"} == {"left", "right"}
+
+
+def test_every_shot_is_seen_as_planned(rig, shots):
+    for s in shots:
+        vis = shot_visibility(rig, s.board)
+        assert vis["direct"] == 1.0, s.name
+        if s.kind == "mirror":
+            assert vis[s.mirror] == 1.0, s.name
+        others = [v for k, v in vis.items() if k not in ("direct", s.mirror)]
+        assert max(others) < 0.5, (s.name, vis)
+
+
+def test_laser_shots_straddle_the_sheet_and_face_laser_and_camera(rig, shots):
+    L = np.asarray(rig.laser.origin_mm)
+    C = rig.camera.center_mm
+    for s in (s for s in shots if s.kind == "laser"):
+        z = s.board.corners_world_mm()[:, 2]
+        assert z.min() < 0 < z.max(), s.name  # the sheet z = 0 crosses the squares
+        n = s.board.T_world_board[:3, 2]
+        centre = s.board.corners_world_mm().mean(axis=0)
+        assert n @ (L - centre) > 0 and n @ (C - centre) > 0
+
+
+def test_same_seed_same_plan_other_seed_other_plan(rig, shots):
+    again = plan_calibration(rig, n_camera=6, n_mirror=2, n_laser=3, seed=4)
+    other = plan_calibration(rig, n_camera=6, n_mirror=2, n_laser=3, seed=5)
+    for a, b in zip(shots, again):
+        np.testing.assert_array_equal(a.board.T_world_board, b.board.T_world_board)
+    assert not np.allclose(shots[0].board.T_world_board, other[0].board.T_world_board)
+
+
+def test_a_board_too_large_for_the_mirrors_is_a_clear_error(rig):
+    huge = Chessboard(squares_x=20, squares_y=20, square_mm=8.0)
+    with pytest.raises(ValueError, match="valid mirror poses"):
+        plan_calibration(rig, huge, camera_board=Chessboard(), n_camera=4, n_mirror=1, n_laser=2,
+                         max_tries=200)
+
+
+def test_too_few_shots_requested(rig):
+    with pytest.raises(ValueError, match="n_laser >= 2"):
+        plan_calibration(rig, n_laser=1)
