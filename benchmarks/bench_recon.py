@@ -5,7 +5,8 @@ three views (direct, left, right) restricted to their geometric windows; a rende
 image of the plug gauge with realistic noise; the true calibration.  Times the plan (projection
 + precomputed cubic samplers, once per calibration and grid) apart from the per-image work
 (sampling + peak finding + assembly), for each peak detector on the numpy path, and the
-Dr.Jit (LLVM) kernel of the centroid path (first call compiles).
+Dr.Jit (LLVM) kernel of the centroid path (first call compiles; ``drjit_llvm_peaks`` is the
+kernel alone, without the numpy assembly; min/max give the spread on a shared machine).
 
 Usage: python benchmarks/bench_recon.py [--repeats 7] [--json out.json]
 """
@@ -58,13 +59,20 @@ def main() -> None:
     out["centroid_without_plan_s"] = time.perf_counter() - t0
     from lts360.recon.fast import FastInverse
 
+    t0 = time.perf_counter()
     fast = FastInverse(plan, backend="llvm")
-    times = []
-    for _ in range(args.repeats + 1):
-        t0 = time.perf_counter()
-        fast(frame.image)
-        times.append(time.perf_counter() - t0)
-    out["drjit_llvm_centroid"] = {"first_s": times[0], "median_s": statistics.median(times[1:])}
+    out["drjit_llvm_setup_s"] = time.perf_counter() - t0
+    for key, call in [("drjit_llvm_centroid", lambda: fast(frame.image)),
+                      ("drjit_llvm_peaks", lambda: fast.peaks(frame.image, threshold=25.5,
+                                                              saturation=255.0))]:
+        times = []
+        for _ in range(args.repeats + 1):
+            t0 = time.perf_counter()
+            call()
+            times.append(time.perf_counter() - t0)
+        warm = times[1:]
+        out[key] = {"first_s": times[0], "median_s": statistics.median(warm),
+                    "min_s": min(warm), "max_s": max(warm)}
     from lts360.recon.classic import classic_triangulate, view_regions
 
     t0 = time.perf_counter()

@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
-from lts360.recon.interp import CubicSampler, keys_kernel, keys_weights, sample_cubic
+from lts360.recon.interp import (CubicSampler, bspline_weights, keys_kernel, keys_weights,
+                                 sample_cubic)
 
 H, W = 40, 56
 
@@ -83,3 +84,34 @@ def test_precomputed_sampler_equals_direct_sampling_on_new_images():
         assert np.allclose(sampler32(img), want, atol=1e-4, equal_nan=True)
     with pytest.raises(ValueError, match="shape"):
         sampler(np.zeros((H + 1, W)))
+
+
+def test_bspline_weights_are_the_cubic_bspline_and_sum_to_one():
+    def beta3(x):
+        x = np.abs(x)
+        return np.where(x < 1, 2 / 3 - x**2 + x**3 / 2, np.where(x < 2, (2 - x) ** 3 / 6, 0.0))
+
+    t = np.linspace(0.0, 1.0, 101)
+    ref = np.stack([beta3(1 + t), beta3(t), beta3(1 - t), beta3(2 - t)], -1)
+    assert np.allclose(bspline_weights(t), ref, atol=1e-15)
+    assert np.allclose(bspline_weights(t).sum(-1), 1.0, atol=1e-15)
+
+
+def test_bspline_interpolation_is_scipys_including_the_border():
+    """Prefilter + 16 taps = ``scipy.ndimage.map_coordinates(order=3, mode="mirror")``; it
+    interpolates the pixels (and stays inside with a float32 precomputed sampler)."""
+    from scipy.ndimage import map_coordinates
+
+    rng = np.random.default_rng(3)
+    img = rng.integers(0, 256, (H, W)).astype(np.uint8)
+    uv = np.column_stack([rng.uniform(0, W - 1, 300), rng.uniform(0, H - 1, 300)])
+    uv[:4] = [[0, 0], [W - 1, H - 1], [0.3, H - 1.2], [W - 1.0, 0.5]]
+    want = map_coordinates(img.astype(float), [uv[:, 1], uv[:, 0]], order=3, mode="mirror")
+    assert np.allclose(sample_cubic(img, uv, interpolation="bspline"), want, atol=1e-9)
+    sampler = CubicSampler.from_points(uv, (H, W), interpolation="bspline", dtype=np.float32)
+    assert np.allclose(sampler(img), want, atol=1e-3)  # float32 weights on values 0..255
+    vv, uu = np.mgrid[0:H, 0:W]
+    centres = np.column_stack([uu.ravel(), vv.ravel()]).astype(float)
+    assert np.allclose(sample_cubic(img, centres, interpolation="bspline"), img.ravel(), atol=1e-9)
+    with pytest.raises(ValueError, match="interpolation"):
+        sample_cubic(img, uv, interpolation="lanczos")

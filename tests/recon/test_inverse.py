@@ -137,6 +137,23 @@ def test_precomputed_plan_gives_the_same_result(cal, grid, gauge_image):
     assert a.threshold == 25.5 and a.saturation == 255.0  # 8-bit defaults
     with pytest.raises(ValueError, match="plan"):
         inverse_triangulate(img8, cal, CylGrid.from_ranges((8.0, 12.0)), plan=plan)
+    with pytest.raises(ValueError, match="interpolation"):
+        inverse_triangulate(img8, cal, grid, plan=plan, interpolation="bspline")
+
+
+def test_bspline_interpolation_recovers_the_gauge_too(cal, grid, gauge_image):
+    """The optional B-spline sampling, with and without a precomputed plan."""
+    img, _ = gauge_image
+    plan = plan_inverse(cal, grid, interpolation="bspline", weights_dtype=np.float64)
+    a = inverse_triangulate(img, cal, grid, interpolation="bspline")
+    b = inverse_triangulate(img, cal, grid, plan=plan)
+    for name, v in a.views.items():
+        assert np.array_equal(v.quality, b.views[name].quality)
+        assert np.allclose(v.r_mm, b.views[name].r_mm, atol=1e-12, equal_nan=True)
+        assert v.valid.sum() > 100
+        assert np.nanmax(np.abs(v.r_mm - R_GAUGE_MM)) < 0.01
+    with pytest.raises(ValueError, match="interpolation"):
+        plan_inverse(cal, grid, interpolation="cubic")
 
 
 def test_shift_on_rays_is_exact_for_a_translated_circle():

@@ -1,26 +1,56 @@
-"""The per-image hot path of inverse triangulation as Dr.Jit kernels (LLVM on CPU, CUDA on GPU).
+"""The per-image hot path of inverse triangulation as one Dr.Jit kernel (LLVM on CPU, CUDA on GPU).
 
 Same arithmetic as the numpy reference (:mod:`lts360.recon.inverse` with the ``centroid``
-detector of :mod:`lts360.recon.peaks`), which it is tested against: Keys bicubic sampling of
-the image at the planned grid points (weights recomputed from the stored pixel coordinates,
-which reads 8 bytes per point instead of 68), then per radial direction the main run above
-the threshold, its thresholded centroid and the quality flag — all with block reductions, no
-Python loop over θ or points.  Single precision on the device (the reference is double):
-radii agree to ~1e-5 mm.
+detector of :mod:`lts360.recon.peaks`), which it is tested against: bicubic sampling of the
+image at the planned grid points (Keys, or cubic B-spline when the plan asks for it — the
+B-spline prefilter then runs on the host), then per radial direction the main run above the
+threshold, its thresholded centroid and the quality flag.  Single precision on the device (the
+reference is double): radii agree to ~1e-6 mm.
+
+How it is laid out (the plan is fixed for a scan, the image changes):
+
+* **4×4 pixel windows.**  The standard grid (0.1° × 5 µm, 3.5 M points in three views)
+  samples only ~14 000 distinct 4×4 pixel neighbourhoods: consecutive radii are ~0.03 px
+  apart.  The plan stores, per point, the index of its window (``uint32``) and its fractional
+  position inside it (two ``float32``; NaN outside the image); per image, one small gather
+  copies the 16 taps of every window into a table (``16 × n_windows`` floats; edge pixels
+  replicated, or B-spline coefficients mirrored, as :mod:`lts360.recon.interp` pads), so that
+  each sample reads its 16 taps with one packet load of 64 contiguous bytes instead of 16
+  scattered gathers.
+* **One thread per radial direction.**  A single kernel walks each profile from the inner to
+  the outer radius, sampling as it goes, and keeps a running account of the runs above the
+  threshold (start, maximum, Σw, Σw·j of the current and of the strongest run, the largest
+  maximum of the other runs) and of the profile's maximum — the quantities
+  :func:`lts360.recon.peaks.main_run` and :func:`~lts360.recon.peaks.centroid` compute with
+  whole-array passes.  No intermediate sample array, no block reductions, no atomics: the
+  sums are accumulated in profile order (deterministic).  A run replaces the strongest one
+  only if its maximum is strictly larger, so ties resolve to the first maximum as
+  ``argmax`` does in the reference.
+* Threshold, saturation and second-peak fraction enter the kernel as opaque values: a new
+  threshold does not recompile it.
+
+Measured on the standard grid (3 600 θ × 801 r, three views, 3.5 M points; 2-core VM shared
+with other jobs, 2026-11-23): a whole call (``__call__``, with the numpy assembly) 20.0 ms
+with the previous multi-pass kernel (16 gathers per sample, block reductions) → 9.0 ms
+(medians of 66 interleaved calls; 10–90 % range 19.5–21.5 → 7.9–10.2 ms); the kernel alone
+(``peaks``) 7.9 ms; ``benchmarks/bench_recon.py``.
+On CUDA the kernel runs one thread per θ row (~4 400 threads for the standard grid); that
+path has not been run on a GPU.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from lts360.recon.interp import prefilter
 from lts360.recon.inverse import (DEFAULT_ACCEPT, InversePlan, InverseResult, assemble_view,
                                   default_saturation, default_threshold)
 from lts360.recon.peaks import DEFAULT_SECOND_PEAK_FRACTION, PeakResult, Quality
 
-__all__ = ["FastInverse"]
+__all__ = ["FastInverse", "window_layout"]
 
-_KEYS_A = -0.5
-_PAD_BEFORE, _PAD_AFTER = 1, 2  # the edge padding of lts360.recon.interp
+#: Taps of a window: offsets −1 … +2 around ``floor(u)``, ``floor(v)`` (Keys' support).
+_TAPS = np.arange(-1, 3)
 
 
 def _backend(name: str):
@@ -41,6 +71,146 @@ def _backend(name: str):
     return dr, mod
 
 
+def _keys_weights(t):
+    """Keys (a = −0.5) weights of the taps −1, 0, 1, 2 at fractional position ``t`` — the closed
+    form of :func:`lts360.recon.interp.keys_weights`, on Dr.Jit arrays."""
+    tm1 = t - 1.0
+    return (-0.5 * t * tm1 * tm1, 0.5 * ((3.0 * t - 5.0) * t * t + 2.0),
+            0.5 * t * ((4.0 - 3.0 * t) * t + 1.0), 0.5 * t * t * tm1)
+
+
+def _bspline_weights(t):
+    """:func:`lts360.recon.interp.bspline_weights` on Dr.Jit arrays."""
+    s = 1.0 - t
+    return (s * s * s * (1.0 / 6.0), ((3.0 * t - 6.0) * t * t + 4.0) * (1.0 / 6.0),
+            (((-3.0 * t + 3.0) * t + 3.0) * t + 1.0) * (1.0 / 6.0), t * t * t * (1.0 / 6.0))
+
+
+def _mirror(k: np.ndarray, n: int) -> np.ndarray:
+    """Indices reflected about the first and last pixel centre (scipy's ``mode="mirror"``)."""
+    if n == 1:
+        return np.zeros_like(k)
+    period = 2 * (n - 1)
+    k = np.abs(k) % period
+    return np.where(k > n - 1, period - k, k)
+
+
+def window_layout(uv: np.ndarray, image_shape, *, boundary: str = "edge"
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Sampling of points by shared 4×4 pixel windows (plan-time, numpy).
+
+    Parameters
+    ----------
+    uv : (n, 2) float
+        Pixel coordinates ``(u, v)`` (NaN allowed).
+    image_shape : (int, int)
+        ``(height, width)``.
+    boundary : {"edge", "mirror"}
+        Taps beyond the border: the edge pixel (Keys) or the mirrored one (B-spline
+        coefficients), as :mod:`lts360.recon.interp` pads.
+
+    Returns
+    -------
+    window : (n,) uint32
+        Index of each point's window (0 for points outside the image).
+    fx, fy : (n,) float32
+        Position inside the window's (0, 0) pixel, in [0, 1]; NaN for points outside
+        ``[0, w − 1] × [0, h − 1]`` (the sample is then NaN, as in the reference).
+    taps : (n_windows, 16) uint32
+        Flat pixel indices of each window's taps, row-major ``(dy, dx)`` in ``{−1 … 2}²``.
+    """
+    if boundary not in ("edge", "mirror"):
+        raise ValueError(f"boundary must be 'edge' or 'mirror', got {boundary!r}")
+    h, w = (int(s) for s in image_shape)
+    uv = np.asarray(uv, dtype=float).reshape(-1, 2)
+    u, v = uv[:, 0], uv[:, 1]
+    with np.errstate(invalid="ignore"):
+        inside = (u >= 0) & (u <= w - 1) & (v >= 0) & (v <= h - 1)
+    u = np.where(inside, u, 0.0)
+    v = np.where(inside, v, 0.0)
+    iu, iv = np.floor(u), np.floor(v)
+    fx = np.where(inside, u - iu, np.nan).astype(np.float32)
+    fy = np.where(inside, v - iv, np.nan).astype(np.float32)
+    key = iv.astype(np.int64) * w + iu.astype(np.int64)
+    corner, window = np.unique(key, return_inverse=True)
+    ty = corner[:, None, None] // w + _TAPS[None, :, None]
+    tx = corner[:, None, None] % w + _TAPS[None, None, :]
+    if boundary == "edge":
+        ty, tx = np.clip(ty, 0, h - 1), np.clip(tx, 0, w - 1)
+    else:
+        ty, tx = _mirror(ty, h), _mirror(tx, w)
+    taps = (ty * w + tx).reshape(-1, 16).astype(np.uint32)
+    return window.astype(np.uint32).ravel(), fx, fy, taps
+
+
+def _walk_profiles(dr, mod, sample, n: int, nr: int, threshold: float,
+                   saturation: float | None, fraction: float):
+    """The main run and thresholded centroid of ``n`` profiles in one pass each (Dr.Jit).
+
+    ``sample(j)`` returns the ``j``-th sample of every profile (a Float of size ``n``; NaN
+    counts as below the threshold, as in :func:`lts360.recon.peaks.main_run`).  The loop keeps,
+    per profile, the current run above the threshold and the strongest run so far (start,
+    maximum, Σw, Σw·(j − start), w = value − threshold), the largest maximum of the other runs
+    and the profile's maximum.  A run replaces the strongest one only if its maximum is strictly
+    larger: ties go to the first maximum, as ``argmax`` in the reference.
+
+    Returns
+    -------
+    centre : Float
+        Centroid of the main run in samples (NaN where there is none).
+    quality : UInt32
+        :class:`Quality` (``FOUND``, ``NO_PEAK``, ``SATURATED``, ``SEVERAL_PEAKS``).
+    peak : Float
+        Largest sample (−inf for an all-NaN profile).
+    """
+    Float, UInt32, Bool = mod.Float, mod.UInt32, mod.Bool
+    thr = dr.opaque(Float, threshold)
+
+    def close(ending, cur, best, other):
+        """Fold the current run into (best, other) where ``ending``."""
+        c_start, c_max, c_sw, c_swj = cur
+        b_start, b_max, b_sw, b_swj = best
+        better = ending & (c_max > b_max)
+        other = dr.select(better, dr.maximum(other, b_max),
+                          dr.select(ending, dr.maximum(other, c_max), other))
+        best = (dr.select(better, c_start, b_start), dr.select(better, c_max, b_max),
+                dr.select(better, c_sw, b_sw), dr.select(better, c_swj, b_swj))
+        return best, other
+
+    def body(j, peak, in_run, c_start, c_max, c_sw, c_swj, b_start, b_max, b_sw, b_swj, other):
+        v = sample(j)
+        v = dr.select(dr.isnan(v), -dr.inf, v)  # NaN (outside the image) is never above
+        peak = dr.maximum(peak, v)
+        above = v > thr
+        wgt = v - thr
+        (b_start, b_max, b_sw, b_swj), other = close(
+            in_run & ~above, (c_start, c_max, c_sw, c_swj), (b_start, b_max, b_sw, b_swj), other)
+        new = above & ~in_run
+        grow = above & in_run
+        c_start = dr.select(new, j, c_start)
+        c_max = dr.select(new, v, dr.select(grow, dr.maximum(c_max, v), c_max))
+        c_sw = dr.select(new, wgt, dr.select(grow, c_sw + wgt, c_sw))
+        c_swj = dr.select(new, 0.0, dr.select(grow, c_swj + wgt * Float(j - c_start), c_swj))
+        return j + 1, peak, above, c_start, c_max, c_sw, c_swj, b_start, b_max, b_sw, b_swj, other
+
+    zu, zf = dr.zeros(UInt32, n), dr.zeros(Float, n)
+    ninf = dr.full(Float, -dr.inf, n)
+    state = (zu, ninf, dr.zeros(Bool, n), zu, ninf, zf, zf, zu, ninf, zf, zf, ninf)
+    (_, peak, in_run, c_start, c_max, c_sw, c_swj, b_start, b_max, b_sw, b_swj,
+     other) = dr.while_loop(state, lambda j, *_: j < nr, body, label="lts360_profiles")
+    (b_start, b_max, b_sw, b_swj), other = close(in_run, (c_start, c_max, c_sw, c_swj),
+                                                 (b_start, b_max, b_sw, b_swj), other)
+    has = peak > thr
+    centre = dr.select(has, Float(b_start) + b_swj / b_sw, dr.nan)
+    q = dr.select(has, UInt32(int(Quality.FOUND)), UInt32(int(Quality.NO_PEAK)))
+    if saturation is not None:
+        q = dr.select(has & (peak >= dr.opaque(Float, saturation)),
+                      UInt32(int(Quality.SATURATED)), q)
+    several = has & (other >= dr.opaque(Float, fraction) * peak)
+    q = dr.select(several, UInt32(int(Quality.SEVERAL_PEAKS)), q)
+    return centre, q, peak
+
+
 class FastInverse:
     """Dr.Jit version of the per-image work of :func:`inverse_triangulate` for one plan.
 
@@ -49,105 +219,96 @@ class FastInverse:
     plan : InversePlan
         From :func:`lts360.recon.inverse.plan_inverse` (the sampler need not be precomputed).
     backend : {"llvm", "cuda"}
+
+    Notes
+    -----
+    Device memory: 12 bytes per grid point (window index and fractional position; 42 MB for
+    the standard grid) plus 64 bytes per window.
     """
 
     def __init__(self, plan: InversePlan, *, backend: str = "llvm") -> None:
+        if not isinstance(plan, InversePlan):
+            raise ValueError(f"plan must be an InversePlan, got {type(plan).__name__}")
         dr, mod = _backend(backend)
         self.dr, self.mod, self.plan = dr, mod, plan
         self.backend = backend
         w, h = plan.cal.image_size
         self.shape = (h, w)
-        self.stride = w + _PAD_BEFORE + _PAD_AFTER
         self.nr = plan.grid.n_r
-        self._r = mod.Float(np.asarray(plan.grid.r_mm, dtype=np.float32))
+        r = np.asarray(plan.grid.r_mm, dtype=float)
+        self._r0, self._step = float(r[0]), float(r[1] - r[0])
         # All views in one launch: their windowed rows are stacked (each row is nr samples).
-        us, vs, ins, self._rows = [], [], [], {}
+        uvs, self._rows = [], {}
         start = 0
         for name, vp in plan.views.items():
-            uv = vp.uv.reshape(-1, 2)
-            with np.errstate(invalid="ignore"):
-                inside = (uv[:, 0] >= 0) & (uv[:, 0] <= w - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= h - 1)
-            us.append(np.where(inside, uv[:, 0], 0.0).astype(np.float32))
-            vs.append(np.where(inside, uv[:, 1], 0.0).astype(np.float32))
-            ins.append(inside)
+            uvs.append(vp.uv.reshape(-1, 2))
             k = len(vp.theta_index)
             self._rows[name] = (start, start + k)
             start += k
         self._n_rows = start
-        self._u = mod.Float(np.concatenate(us))
-        self._v = mod.Float(np.concatenate(vs))
-        self._inside = mod.Bool(np.concatenate(ins))
+        uv = np.concatenate(uvs) if uvs else np.zeros((0, 2))
+        self.interpolation = plan.interpolation
+        window, fx, fy, taps = window_layout(
+            uv, self.shape, boundary="edge" if self.interpolation == "keys" else "mirror")
+        self.n_windows = len(taps)
+        self._window = mod.UInt32(window)
+        self._fx = mod.Float(fx)
+        self._fy = mod.Float(fy)
+        self._taps = mod.UInt32(taps.ravel())
 
-    def _keys(self, x):
-        dr = self.dr
-        x = dr.abs(x)
-        a = _KEYS_A
-        near = ((a + 2.0) * x - (a + 3.0)) * x * x + 1.0
-        far = ((a * x - 5.0 * a) * x + 8.0 * a) * x - 4.0 * a
-        return dr.select(x <= 1.0, near, dr.select(x < 2.0, far, 0.0))
-
-    def _sample(self, img, u, v, inside):
+    def _tap_table(self, img: np.ndarray):
+        """``(16 n_windows,)`` floats: the taps of every window in this image."""
         dr, mod = self.dr, self.mod
-        iu, iv = dr.floor(u), dr.floor(v)
-        fx, fy = u - iu, v - iv
-        wx = [self._keys(fx + 1.0), self._keys(fx), self._keys(1.0 - fx), self._keys(2.0 - fx)]
-        wy = [self._keys(fy + 1.0), self._keys(fy), self._keys(1.0 - fy), self._keys(2.0 - fy)]
-        base = mod.Int32((iv + _PAD_BEFORE) * self.stride + iu + _PAD_BEFORE)
-        acc = mod.Float(0.0)
-        for j in range(4):
-            row = mod.Float(0.0)
-            for i in range(4):
-                idx = mod.UInt32(base + ((j - 1) * self.stride + (i - 1)))
-                row = row + wx[i] * dr.gather(mod.Float, img, idx, inside)
-            acc = acc + wy[j] * row
-        return dr.select(inside, acc, dr.nan)
+        if self.interpolation == "bspline":
+            img = prefilter(img, "bspline")  # B-spline coefficients, on the host (scipy)
+        flat = np.ascontiguousarray(img).ravel()
+        if flat.dtype == np.uint8:  # 1 byte per pixel over the bus, converted after the gather
+            table = mod.Float(dr.gather(mod.UInt8, mod.UInt8(flat), self._taps))
+        else:
+            table = dr.gather(mod.Float, mod.Float(flat.astype(np.float32, copy=False)),
+                              self._taps)
+        dr.eval(table)
+        return table
 
-    def _centroid(self, vals, k, threshold, saturation, fraction):
+    def _profile_kernel(self, table, threshold, saturation, fraction):
+        """Walk every profile once; return centroid radius, quality and peak per row."""
         dr, mod = self.dr, self.mod
-        nr = self.nr
-        n = k * nr
-        idx = dr.arange(mod.UInt32, n)
-        row = idx // nr
-        col = mod.Int32(idx - row * nr)
-        vals = dr.select(dr.isnan(vals), -dr.inf, vals)
-        peak = dr.block_reduce(dr.ReduceOp.Max, vals, nr)
-        peak_b = dr.gather(mod.Float, peak, row)
-        imax = dr.block_reduce(dr.ReduceOp.Min, dr.select(vals == peak_b, col, nr), nr)
-        imax_b = dr.gather(mod.Int32, imax, row)
-        above = vals > threshold
-        gap = ~above
-        left = dr.block_reduce(dr.ReduceOp.Max, dr.select(gap & (col < imax_b), col, -1), nr)
-        right = dr.block_reduce(dr.ReduceOp.Min, dr.select(gap & (col > imax_b), col, nr), nr)
-        has = peak > threshold
-        run = (col > dr.gather(mod.Int32, left, row)) & (col < dr.gather(mod.Int32, right, row)) \
-            & dr.gather(mod.Bool, has, row)
-        other = dr.block_reduce(dr.ReduceOp.Max, dr.select(above & ~run, vals, -dr.inf), nr)
-        w = dr.select(run, vals - threshold, 0.0)
-        r = dr.gather(mod.Float, self._r, mod.UInt32(col))
-        sw = dr.block_reduce(dr.ReduceOp.Add, w, nr)
-        swr = dr.block_reduce(dr.ReduceOp.Add, w * r, nr)
-        rc = swr / sw
-        several = has & (other >= fraction * peak)
-        q = dr.select(has, mod.UInt32(int(Quality.FOUND)), mod.UInt32(int(Quality.NO_PEAK)))
-        if saturation is not None:
-            q = dr.select(has & (peak >= saturation), mod.UInt32(int(Quality.SATURATED)), q)
-        q = dr.select(several, mod.UInt32(int(Quality.SEVERAL_PEAKS)), q)
-        return rc, q, peak
+        Float, UInt32 = mod.Float, mod.UInt32
+        n = self._n_rows
+        base = dr.arange(UInt32, n) * self.nr
+        weights = _keys_weights if self.interpolation == "keys" else _bspline_weights
+
+        def sample(j):
+            p = base + j
+            taps = dr.gather(mod.ArrayXf, table, dr.gather(UInt32, self._window, p),
+                             shape=(16, n))
+            wx = weights(dr.gather(Float, self._fx, p))
+            wy = weights(dr.gather(Float, self._fy, p))
+            acc = None
+            for k in range(4):
+                row = (wx[0] * taps[4 * k] + wx[1] * taps[4 * k + 1] + wx[2] * taps[4 * k + 2]
+                       + wx[3] * taps[4 * k + 3])
+                acc = wy[k] * row if acc is None else acc + wy[k] * row
+            return acc
+
+        centre, q, peak = _walk_profiles(dr, mod, sample, n, self.nr, threshold, saturation,
+                                         fraction)
+        return self._r0 + self._step * centre, q, peak
 
     def peaks(self, image, *, threshold: float, saturation: float | None,
               second_peak_fraction: float = DEFAULT_SECOND_PEAK_FRACTION) -> dict[str, PeakResult]:
         """Per view: the centroid peak of every windowed θ (numpy arrays on return)."""
-        dr, mod = self.dr, self.mod
+        dr = self.dr
         img = np.asarray(image)
         if img.shape != self.shape:
             raise ValueError(f"image has shape {img.shape}, the plan was built for {self.shape}")
-        padded = np.pad(img.astype(np.float32), ((_PAD_BEFORE, _PAD_AFTER), (_PAD_BEFORE, _PAD_AFTER)),
-                        mode="edge")
-        dimg = mod.Float(padded.ravel())
-        vals = self._sample(dimg, self._u, self._v, self._inside)
-        rc, q, peak = self._centroid(vals, self._n_rows, float(threshold),
-                                     None if saturation is None else float(saturation),
-                                     float(second_peak_fraction))
+        if self._n_rows == 0:
+            return {name: PeakResult(r_mm=np.zeros(0), quality=np.zeros(0, np.uint8),
+                                     intensity=np.zeros(0)) for name in self._rows}
+        table = self._tap_table(img)
+        rc, q, peak = self._profile_kernel(table, float(threshold),
+                                           None if saturation is None else float(saturation),
+                                           float(second_peak_fraction))
         dr.eval(rc, q, peak)
         r_all = np.asarray(rc, dtype=float)
         q_all = np.asarray(q, dtype=np.uint8)

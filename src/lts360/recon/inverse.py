@@ -8,7 +8,8 @@ tested against these):
    ``g = P · T_view · T_cam_meas · G``, with distortion); optionally a precomputed
    :class:`~lts360.recon.interp.CubicSampler` (the projection is the same for every image of a
    scan);
-2. :func:`sample_profiles` — Keys bicubic sampling of the image along every radial direction;
+2. :func:`sample_profiles` — bicubic sampling of the image along every radial direction (Keys
+   by default, cubic B-spline on request: :mod:`lts360.recon.interp`);
 3. :func:`lts360.recon.peaks.detect_peaks` — one line centre per radial direction;
 4. :func:`assemble_view` — radius, flags and points per θ, residual compensation (§4.4).
 
@@ -32,7 +33,7 @@ import numpy as np
 from lts360.geometry.fit import fit_circle
 from lts360.recon.calibration import Calibration
 from lts360.recon.grid import CylGrid
-from lts360.recon.interp import CubicSampler, sample_cubic
+from lts360.recon.interp import INTERPOLATIONS, CubicSampler, sample_cubic
 from lts360.recon.peaks import PeakResult, Quality, detect_peaks
 from lts360.recon.views import (DEFAULT_MAX_INCIDENCE_DEG, DIRECT, View, get_views,
                                 project_meas_points, view_windows)
@@ -85,6 +86,7 @@ class ViewPlan:
         Pixel coordinates of the windowed grid points.
     sampler : CubicSampler or None
         Precomputed sampling of ``uv`` (see :func:`plan_inverse`).
+    interpolation : {"keys", "bspline"}
     """
 
     view: View
@@ -92,6 +94,7 @@ class ViewPlan:
     theta_index: np.ndarray
     uv: np.ndarray
     sampler: CubicSampler | None
+    interpolation: str = "keys"
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,6 +104,7 @@ class InversePlan:
     cal: Calibration
     grid: CylGrid
     views: dict[str, ViewPlan]
+    interpolation: str = "keys"
 
     @property
     def nbytes(self) -> int:
@@ -152,7 +156,7 @@ def _resolve_windows(cal, grid, views, windows, max_incidence_deg) -> dict[str, 
 
 def plan_inverse(cal: Calibration, grid: CylGrid, *, views=None, windows=None,
                  max_incidence_deg: float = DEFAULT_MAX_INCIDENCE_DEG, precompute: bool = True,
-                 weights_dtype=np.float32) -> InversePlan:
+                 weights_dtype=np.float32, interpolation: str = "keys") -> InversePlan:
     """Windows and projections of every view, optionally with precomputed samplers.
 
     Parameters
@@ -172,7 +176,14 @@ def plan_inverse(cal: Calibration, grid: CylGrid, *, views=None, windows=None,
         image in one gather (≈ 0.16 s instead of ≈ 0.6 s per image for the whole pipeline).
     weights_dtype : numpy float dtype
         Storage of the sampler weights (``float32``: relative rounding ~1e-7 of a sample).
+    interpolation : {"keys", "bspline"}
+        Keys cubic convolution (the paper's) or cubic B-spline interpolation: a smaller
+        sub-pixel error of the line centre on a ~1 px wide line (3.2 → 2.4 µm rms on the
+        rendered plug gauge) but more noise passed, and a prefilter of each image per view
+        (~17 ms at 1280×1024) (:mod:`lts360.recon.interp`).
     """
+    if interpolation not in INTERPOLATIONS:
+        raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")
     if not isinstance(cal, Calibration):
         raise ValueError(f"cal must be a Calibration, got {type(cal).__name__}")
     if not isinstance(grid, CylGrid):
@@ -187,10 +198,11 @@ def plan_inverse(cal: Calibration, grid: CylGrid, *, views=None, windows=None,
     for v in view_list:
         idx = np.flatnonzero(masks[v.name])
         uv = project_grid(cal, grid, v, idx)
-        sampler = CubicSampler.from_points(uv, (h, w), dtype=weights_dtype) if precompute else None
+        sampler = CubicSampler.from_points(uv, (h, w), dtype=weights_dtype,
+                                           interpolation=interpolation) if precompute else None
         plans[v.name] = ViewPlan(view=v, window=masks[v.name].copy(), theta_index=idx, uv=uv,
-                                 sampler=sampler)
-    return InversePlan(cal=cal, grid=grid, views=plans)
+                                 sampler=sampler, interpolation=interpolation)
+    return InversePlan(cal=cal, grid=grid, views=plans, interpolation=interpolation)
 
 
 # -- stage 2: sampling -------------------------------------------------------------------------
@@ -199,7 +211,7 @@ def sample_profiles(image: np.ndarray, view_plan: ViewPlan) -> np.ndarray:
     """Intensity profiles of one view: (k, nr) float, NaN where the grid leaves the image."""
     if view_plan.sampler is not None:
         return view_plan.sampler(image)
-    return sample_cubic(image, view_plan.uv)
+    return sample_cubic(image, view_plan.uv, interpolation=view_plan.interpolation)
 
 
 # -- stage 4: assembly -------------------------------------------------------------------------
@@ -438,7 +450,8 @@ def inverse_triangulate(image, cal: Calibration, grid: CylGrid, *, views=None, w
                         saturation: float | None = None, accept=DEFAULT_ACCEPT,
                         compensate: bool = False, plan: InversePlan | None = None,
                         max_incidence_deg: float = DEFAULT_MAX_INCIDENCE_DEG,
-                        peak_options: Mapping | None = None) -> InverseResult:
+                        peak_options: Mapping | None = None,
+                        interpolation: str | None = None) -> InverseResult:
     """Measure the laser section in one image (paper §3.2).
 
     Parameters
@@ -468,6 +481,8 @@ def inverse_triangulate(image, cal: Calibration, grid: CylGrid, *, views=None, w
     peak_options : mapping, optional
         Extra keyword arguments of the detector (``second_peak_fraction``, ``fit``,
         ``line_width_mm``, ``sigma_mm``, ``subtract_threshold``, ...).
+    interpolation : {"keys", "bspline"}, optional
+        Sampling of the image (:func:`plan_inverse`); default: the plan's, or ``"keys"``.
     """
     img = np.asarray(image)
     w, h = cal.image_size
@@ -476,9 +491,13 @@ def inverse_triangulate(image, cal: Calibration, grid: CylGrid, *, views=None, w
                          f"got {img.shape}")
     if plan is None:
         plan = plan_inverse(cal, grid, views=views, windows=windows,
-                            max_incidence_deg=max_incidence_deg, precompute=False)
+                            max_incidence_deg=max_incidence_deg, precompute=False,
+                            interpolation="keys" if interpolation is None else interpolation)
     elif plan.cal is not cal or plan.grid is not grid:
         raise ValueError("plan: was built for another calibration or grid")
+    elif interpolation is not None and interpolation != plan.interpolation:
+        raise ValueError(f"interpolation: {interpolation!r} differs from the plan's "
+                         f"{plan.interpolation!r}")
     thr = default_threshold(img) if threshold is None else float(threshold)
     sat = default_saturation(img) if saturation is None else float(saturation)
     if sat is not None and sat <= thr:
