@@ -1,0 +1,330 @@
+"""``lts360 study monte-carlo``: the uncertainty of the plug-gauge radius by the Monte Carlo
+method of GUM Supplement 1 (JCGM 101:2008), beside a GUM (JCGM 100) uncertainty budget.
+
+Measurand: the radius error Y = R_measured − R_nominal of the Ø19.9987 mm gauge (µm).
+
+Inputs and their distributions (each drawn independently per trial):
+
+==================  ==========================================================================
+calibration         the estimated calibration drawn from its own covariance (Gaussian:
+                    OpenCV's intrinsic σ; mirror and laser planes from the LSQ / jackknife
+                    covariance of ``lts360 calibrate``), :func:`sample_calibration`, followed
+                    — as in the lab — by a new §4.4 compensation measured with it on the
+                    gauge at the reference placement
+sensor noise        EMVA 1288 temporal noise redrawn (shot, read, quantisation)
+speckle             a new speckle pattern (a new patch of surface under the line)
+placement           one of ``placements`` pre-rendered gauge placements, uniform (offset in a
+                    0.3 mm disc, tilt ≤ 0.3°): a discrete sample of the placement distribution
+temperature         ΔT ~ U(−5, 5) K, steel α = 11.5e-6 /K: the gauge radius grows by α·R·ΔT
+                    while its nominal value stays (added to Y; first order exact)
+==================  ==========================================================================
+
+Render once, perturb many: each placement is rendered once (noise-free radiance); a trial
+redraws the speckle and the sensor noise on the stored radiance, draws a calibration and
+reconstructs — nothing is re-rendered.
+
+Two procedures: a fixed number of trials M, or the adaptive procedure of JCGM 101 §7.9 —
+batches of ``batch`` trials until twice the standard deviations of the batch means of the
+mean, the standard uncertainty and both ends of the 95 % coverage interval are all below the
+numerical tolerance δ (§7.9.2: δ = ½·10^l for u(y) written with ``n_dig`` significant digits).
+The coverage interval is the probabilistically symmetric one (§7.7).
+
+Sensitivity: "one at a time" runs where only one input varies (the others at their nominal
+value: the estimated calibration, no noise, no speckle, the first placement, ΔT = 0) give each
+input's contribution u_i; the GUM budget combines them as √Σu_i² (independent inputs,
+linear model) and is compared with the Monte Carlo u(y).  The speckle limit of laser
+triangulation (Dorsch, Häusler, Herrmann, Appl. Opt. 33(7) 1994) for the same optics,
+δz = C·λ / (2π·sin u_obs·sin θ), is compared with the per-point scatter of the speckle-only run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from lts360.experiments.gauge_study import (DELTA_T_K, GAUGE_DIAMETER_MM, STEEL_ALPHA_PER_K,
+                                            gauge_placements)
+from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study
+
+__all__ = ["INPUTS", "mc_trial", "run_monte_carlo_study", "coverage_interval",
+           "adaptive_stable", "dorsch_speckle_limit_um", "format_mc"]
+
+INPUTS = ("calibration", "sensor_noise", "speckle", "placement", "temperature")
+
+
+def coverage_interval(y: np.ndarray, p: float = 0.95) -> tuple[float, float]:
+    """Probabilistically symmetric 100p % coverage interval (JCGM 101 §7.7)."""
+    y = np.sort(np.asarray(y, float))
+    M = len(y)
+    q = int(round(p * M))
+    r = int(round((M - q) / 2))
+    lo = y[max(r - 1, 0)] if r >= 1 else y[0]
+    hi = y[min(r + q - 1, M - 1)]
+    return float(lo), float(hi)
+
+
+def _tolerance(u: float, n_dig: int) -> float:
+    """JCGM 101 §7.9.2: δ = ½·10^l with u written as c·10^l, c an n_dig-digit integer."""
+    if not u > 0:
+        return math.inf
+    l = math.floor(math.log10(u)) - (n_dig - 1)
+    return 0.5 * 10.0**l
+
+
+def adaptive_stable(batches: list[np.ndarray], n_dig: int = 2, p: float = 0.95) -> tuple[bool, dict]:
+    """JCGM 101 §7.9.4 stopping rule over the batches so far."""
+    h = len(batches)
+    stats = np.array([[b.mean(), b.std(ddof=1), *coverage_interval(b, p)] for b in batches])
+    u = float(np.concatenate(batches).std(ddof=1))
+    delta = _tolerance(u, n_dig)
+    if h < 2:
+        return False, {"h": h, "delta": delta}
+    s = stats.std(axis=0, ddof=1) / math.sqrt(h)
+    return bool(np.all(2 * s <= delta)), {"h": h, "delta": delta, "2s": (2 * s).tolist()}
+
+
+def dorsch_speckle_limit_um(rig) -> dict:
+    """δz of Dorsch, Häusler and Herrmann (1994) for the rig's optics (µm), per point."""
+    from lts360.simulator.speckle import speckle_contrast_theory
+
+    cam = rig.camera
+    m = cam.focal_length_mm / (cam.focus_distance_mm - cam.focal_length_mm)
+    C = speckle_contrast_theory(cam.pixel_pitch_um, rig.laser.wavelength_nm, cam.f_number,
+                                magnification=m)
+    z_obj = float(np.linalg.norm(cam.center_mm))  # camera to the object axis
+    sin_u = (cam.focal_length_mm / cam.f_number) / (2.0 * z_obj)
+    theta = math.radians(rig.design.alpha_deg)
+    lam_um = rig.laser.wavelength_nm * 1e-3
+    return {"contrast": C, "sin_u_obs": sin_u, "triangulation_deg": rig.design.alpha_deg,
+            "delta_z_um": C * lam_um / (2 * math.pi * sin_u * math.sin(theta))}
+
+
+@functools.lru_cache(maxsize=16)
+def _placement(frame_dir: str):
+    """Stored radiance + the frame's rig (read once per process)."""
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.io import read_exr
+
+    ch = read_exr(Path(frame_dir) / "radiance.exr")
+    meta = json.loads((Path(frame_dir) / "frame.json").read_text())
+    return ch["Y"], ch["laser"], meta
+
+
+@functools.lru_cache(maxsize=2)
+def _calibration(path: str):
+    from lts360.recon.calibration import load_calibration
+
+    return load_calibration(path)
+
+
+@functools.lru_cache(maxsize=16)
+def _nominal_radii(frame_dir: str, cal_path: str, rig_name: str, theta_step_deg: float) -> dict:
+    """Per-view radii of a placement without noise or speckle (the speckle run's reference)."""
+    from types import SimpleNamespace
+
+    from lts360.recon.grid import CylGrid
+    from lts360.recon.inverse import inverse_triangulate
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.frame import sensor_image
+
+    Y, L, _ = _placement(frame_dir)
+    img, _, _ = sensor_image(load_rig(rig_name), SimpleNamespace(radiance_W_m2_sr=Y,
+                                                                  laser_W_m2_sr=L), noise="none")
+    r0 = GAUGE_DIAMETER_MM / 2.0
+    grid = CylGrid.from_ranges((r0 - 0.5, r0 + 0.5), theta_step_deg=theta_step_deg, r_step_mm=0.005)
+    res = inverse_triangulate(img, _calibration(cal_path), grid, compensate=True)
+    return {n: v.r_mm for n, v in res.views.items()}
+
+
+def mc_trial(trial: Trial) -> TrialOutput:
+    """One Monte Carlo draw (see the module docstring); ``params['vary']`` names the inputs
+    that vary (``all`` or one of :data:`INPUTS`)."""
+    from types import SimpleNamespace
+
+    from lts360.geometry.fit import fit_circle
+    from lts360.recon.compensation import joint_view_offsets
+    from lts360.recon.grid import CylGrid
+    from lts360.recon.inverse import inverse_triangulate
+    from lts360.recon.uncertainty import sample_calibration
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.frame import sensor_image
+
+    p = trial.params
+    vary = set(INPUTS) if p["vary"] == "all" else {p["vary"]}
+    rng = np.random.default_rng(trial.seed)
+    seeds = rng.integers(0, 2**31, size=4)
+    n_pl = int(p["placements"])
+    k = int(rng.integers(n_pl)) if "placement" in vary else 0
+    Y, L, meta = _placement(str(Path(p["renders"]) / f"placement_{k:02d}"))
+    rig = load_rig(p["rig"])
+    res = SimpleNamespace(radiance_W_m2_sr=Y, laser_W_m2_sr=L)
+    image, _, _ = sensor_image(rig, res, noise="realistic" if "sensor_noise" in vary else "none",
+                               seed=int(seeds[0]), speckle="speckle" in vary,
+                               speckle_seed=int(seeds[1]))
+    cal = _calibration(p["calibration"])
+    r0 = GAUGE_DIAMETER_MM / 2.0
+    grid = CylGrid.from_ranges((r0 - 0.5, r0 + 0.5), theta_step_deg=float(p["theta_step_deg"]),
+                               r_step_mm=0.005)
+    if "calibration" in vary:
+        # A new calibration is followed by a new §4.4 compensation, as in the lab: measure
+        # the gauge at the reference placement with it and put the views on one circle.
+        cal = sample_calibration(cal, np.random.default_rng(seeds[2]))
+        Y0, L0, _ = _placement(str(Path(p["renders"]) / "placement_00"))
+        ref, _, _ = sensor_image(rig, SimpleNamespace(radiance_W_m2_sr=Y0, laser_W_m2_sr=L0),
+                                 noise="none", seed=0)
+        offsets = joint_view_offsets(inverse_triangulate(ref, cal, grid))
+        cal = dataclasses.replace(cal, view_offsets_mm=offsets)
+    out = inverse_triangulate(image, cal, grid, compensate=True)
+    extra = {}
+    if p["vary"] == "speckle":  # per-point scatter caused by speckle alone (vs. no speckle)
+        nominal = _nominal_radii(str(Path(p["renders"]) / f"placement_{k:02d}"), p["calibration"],
+                                 p["rig"], float(p["theta_step_deg"]))
+        diffs = np.concatenate([out.views[n].r_mm - nominal[n] for n in out.views])
+        extra["speckle_point_std_um"] = float(np.nanstd(diffs) * 1e3)
+    pts = np.concatenate([v.points_meas_mm[v.valid, :2] for v in out.views.values()])
+    dT = float(np.random.default_rng(seeds[3]).uniform(-DELTA_T_K, DELTA_T_K)) \
+        if "temperature" in vary else 0.0
+    if len(pts) < 10:
+        return TrialOutput(values={"y_um": np.nan, "point_std_um": np.nan, "n_points": 0,
+                                   "placement": k, "delta_T_K": dT})
+    fit = fit_circle(pts)
+    r = np.hypot(*(pts - fit.center_mm).T)
+    y = (fit.radius_mm - r0) * 1e3 + STEEL_ALPHA_PER_K * r0 * dT * 1e3
+    return TrialOutput(values={"y_um": float(y), "point_std_um": float(r.std() * 1e3),
+                               "n_points": int(len(pts)), "placement": k, "delta_T_K": dT,
+                               **extra})
+
+
+def _render_placements(out: Path, n: int, *, rig: str, seed: int, spp: int, say) -> Path:
+    import mitsuba as mi
+
+    from lts360.scenes.objects import build_object
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.frame import simulate_frame, write_frame
+
+    root = out / "renders"
+    if mi.variant() is None:
+        mi.set_variant("llvm_ad_mono")
+    for k, params in enumerate(gauge_placements(n, seed)):
+        d = root / f"placement_{k:02d}"
+        if (d / "frame.json").is_file():
+            continue
+        say(f"rendering placement {k + 1}/{n}: {params['spec']}")
+        frame = simulate_frame(load_rig(rig), build_object(params["spec"]), spp=spp,
+                               seed=seed * 100 + k, noise="none")
+        write_frame(d, frame)
+    return root
+
+
+def _batch_seed(seed: int, name: str, h: int) -> int:
+    key = [int(seed), sum(map(ord, name)), h]
+    return int(np.random.SeedSequence(key).generate_state(1)[0])
+
+
+def _run_batches(out: Path, name: str, base: dict, *, seed: int, batch: int, max_batches: int,
+                 adaptive: bool, n_dig: int, workers, dask_address, say) -> tuple[np.ndarray, dict]:
+    batches, info = [], {}
+    for h in range(max_batches):
+        trials = plan_trials([dict(base)] * batch, _batch_seed(seed, name, h))
+        ds = run_study(out / name / f"batch_{h:03d}", trials, mc_trial, name=f"{name}-{h}",
+                       workers=workers, dask_address=dask_address, progress=True)
+        y = ds["y_um"].values
+        batches.append(y[np.isfinite(y)])
+        if adaptive:
+            stable, info = adaptive_stable(batches, n_dig)
+            say(f"{name}: {sum(map(len, batches))} trials, δ = {info['delta']:.3g} µm, "
+                f"stable: {stable}")
+            if stable:
+                break
+    return np.concatenate(batches), info
+
+
+def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive: bool = False,
+                          batch: int = 100, n_dig: int = 2, sensitivity_trials: int = 50,
+                          placements: int = 8, seed: int = 0, rig: str = "paper", spp: int = 16,
+                          theta_step_deg: float = 0.5, workers: int | None = None,
+                          dask_address: str | None = None, say=print) -> dict:
+    """Run the study (see the module docstring); returns the summary written to summary.json."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    renders = _render_placements(out, placements, rig=rig, seed=seed, spp=spp, say=say)
+    base = {"calibration": str(Path(calibration).resolve()), "renders": str(renders.resolve()),
+            "placements": placements, "rig": rig, "theta_step_deg": theta_step_deg}
+    if workers is None and dask_address is None:
+        workers = 2
+    kw = dict(seed=seed, workers=workers, dask_address=dask_address, say=say)
+    y, info = _run_batches(out, "mc", dict(base, vary="all"), batch=batch,
+                           max_batches=(10_000 if adaptive else max(1, math.ceil(trials / batch))),
+                           adaptive=adaptive, n_dig=n_dig, **kw)
+    lo, hi = coverage_interval(y)
+    summary = {"M": int(len(y)), "mean_um": float(y.mean()), "u_um": float(y.std(ddof=1)),
+               "interval95_um": [lo, hi], "adaptive": adaptive, "adaptive_info": info}
+    budget = {}
+    for name in INPUTS:
+        yi, _ = _run_batches(out, f"only-{name}", dict(base, vary=name), batch=sensitivity_trials,
+                             max_batches=1, adaptive=False, n_dig=n_dig, **kw)
+        budget[name] = {"u_um": float(yi.std(ddof=1)), "mean_um": float(yi.mean()),
+                        "M": int(len(yi))}
+    summary["budget"] = budget
+    summary["gum_u_um"] = float(math.sqrt(sum(b["u_um"] ** 2 for b in budget.values())))
+    summary["ranking"] = sorted(budget, key=lambda k: -budget[k]["u_um"])
+    from lts360.scenes.rig_io import load_rig
+
+    summary["dorsch"] = dorsch_speckle_limit_um(load_rig(rig))
+    import xarray as xr
+
+    sp = xr.open_dataset(out / "only-speckle" / "batch_000" / "results.nc")
+    summary["speckle_point_std_um"] = float(np.nanmean(sp["speckle_point_std_um"].values))
+    sp.close()
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    _plot(y, summary, out / "monte-carlo.png")
+    return summary
+
+
+def _plot(y, summary, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4))
+    ax[0].hist(y, bins=max(10, int(math.sqrt(len(y)))), density=True, color="0.6")
+    lo, hi = summary["interval95_um"]
+    for v in (lo, hi):
+        ax[0].axvline(v, color="r", ls="--")
+    xs = np.linspace(y.min(), y.max(), 200)
+    m, u = summary["mean_um"], summary["gum_u_um"]
+    ax[0].plot(xs, np.exp(-0.5 * ((xs - m) / u) ** 2) / (u * math.sqrt(2 * math.pi)), "b-",
+               label=f"GUM: N({m:.1f}, {u:.1f}²)")
+    ax[0].set_xlabel("radius error Y (µm)")
+    ax[0].set_title(f"Monte Carlo, M = {summary['M']}; 95 % interval [{lo:.1f}, {hi:.1f}] µm")
+    ax[0].legend()
+    names = summary["ranking"]
+    ax[1].barh(names[::-1], [summary["budget"][n]["u_um"] for n in names[::-1]])
+    ax[1].set_xlabel("u_i (µm), one input at a time")
+    fig.tight_layout()
+    tmp = path.with_name(f".{path.stem}.tmp.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(path)
+
+
+def format_mc(s: dict) -> str:
+    lines = [f"Monte Carlo (GUM-S1): M = {s['M']}, y = {s['mean_um']:+.2f} µm, "
+             f"u(y) = {s['u_um']:.2f} µm, 95 % interval [{s['interval95_um'][0]:+.2f}, "
+             f"{s['interval95_um'][1]:+.2f}] µm",
+             f"GUM budget (one input at a time, √Σu_i²): u_c = {s['gum_u_um']:.2f} µm"]
+    for name in s["ranking"]:
+        b = s["budget"][name]
+        lines.append(f"  {name:14s} u_i = {b['u_um']:7.2f} µm  (mean {b['mean_um']:+.2f}, M = {b['M']})")
+    d = s["dorsch"]
+    lines.append(f"speckle limit (Dorsch et al. 1994), per point: δz = {d['delta_z_um']:.1f} µm "
+                 f"(C = {d['contrast']:.3f}, sin u = {d['sin_u_obs']:.4f}, θ = "
+                 f"{d['triangulation_deg']:.0f}°); simulated speckle-only point scatter "
+                 f"{s['speckle_point_std_um']:.1f} µm")
+    return "\n".join(lines)
