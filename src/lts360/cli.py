@@ -216,6 +216,177 @@ def _cmd_score(args) -> int:
     return 0
 
 
+def _board_arg(text: str, name: str):
+    """``SXxSYxMM`` (squares along x and y, square side in mm) → Chessboard."""
+    from lts360.scenes.targets import Chessboard
+
+    try:
+        sx, sy, mm = text.lower().split("x")
+        sx, sy, mm = int(sx), int(sy), float(mm)
+    except ValueError:
+        raise UsageError(f"{name}: expected SQUARESxSQUARESxSIDE_MM such as 7x6x2, got {text!r}") \
+            from None
+    return Chessboard(squares_x=sx, squares_y=sy, square_mm=mm, margin_mm=max(1.0, mm / 2))
+
+
+def _cmd_calibrate(args) -> int:
+    from lts360.experiments.calibrate import format_report, run_calibrate
+
+    if args.seed < 0:
+        raise UsageError(f"--seed: must be >= 0, got {args.seed}")
+    if not 1 <= args.spp <= 4096:
+        raise UsageError(f"--spp: must be in [1, 4096], got {args.spp}")
+    if args.camera_poses < 4 or args.mirror_poses < 1 or args.laser_poses < 2:
+        raise UsageError("--camera-poses >= 4, --mirror-poses >= 1 and --laser-poses >= 2 needed, "
+                         f"got {args.camera_poses}, {args.mirror_poses}, {args.laser_poses}")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out: {str(out)!r} exists and is not a directory")
+    if args.images is not None:
+        if not Path(args.images).is_dir():
+            raise UsageError(f"--images: {args.images!r} is not a directory")
+    else:
+        from lts360.scenes.rig_io import load_rig
+
+        load_rig(args.rig)  # fail early on a bad rig
+        _set_variant(args.variant)
+    board = _board_arg(args.board, "--board")
+    camera_board = None if args.camera_board is None else _board_arg(args.camera_board,
+                                                                     "--camera-board")
+    report = run_calibrate(out, rig_name=args.rig, noise=args.noise, seed=args.seed,
+                           images_dir=args.images, spp=args.spp, n_camera=args.camera_poses,
+                           n_mirror=args.mirror_poses, n_laser=args.laser_poses, board=board,
+                           camera_board=camera_board, tangential=args.tangential,
+                           thin_lens=not args.pinhole)
+    print(format_report(report))
+    print(f"wrote {out}/calibration.json, report.json, fig8.png")
+    return 0
+
+
+def _study_common(args) -> dict:
+    if args.seed < 0:
+        raise UsageError(f"--seed: must be >= 0, got {args.seed}")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers: must be >= 1, got {args.workers}")
+    if args.workers is not None and args.dask is not None:
+        raise UsageError("--workers and --dask exclude each other")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out: {str(out)!r} exists and is not a directory")
+    return {"seed": args.seed, "dask_address": args.dask}
+
+
+def _cmd_study_plug_gauge(args) -> int:
+    from lts360.experiments.gauge_study import format_gauge_table, run_plug_gauge_study
+
+    common = _study_common(args)
+    if not 1 <= args.trials <= 10000:
+        raise UsageError(f"--trials: must be in [1, 10000], got {args.trials}")
+    if args.calibration is not None and not Path(args.calibration).is_file():
+        raise UsageError(f"--calibration: {args.calibration!r} is not a file")
+    _set_variant(args.variant)
+    table = run_plug_gauge_study(args.out, trials=args.trials, calibration=args.calibration,
+                                 noise=args.noise, spp=args.spp,
+                                 workers=args.workers or 1, **common)
+    print(format_gauge_table(table))
+    print(f"wrote {args.out}/ (table.txt, table.json, plug-gauge.png, trials/results.nc)")
+    return 0
+
+
+def _cmd_study_monte_carlo(args) -> int:
+    from lts360.experiments.gauge_study import ensure_calibration
+    from lts360.experiments.monte_carlo import format_mc, run_monte_carlo_study
+
+    common = _study_common(args)
+    if not 2 <= args.trials <= 10**6:
+        raise UsageError(f"--trials: must be in [2, 1000000], got {args.trials}")
+    if not 2 <= args.batch <= 10**5 or not 2 <= args.sensitivity_trials <= 10**5:
+        raise UsageError("--batch and --sensitivity-trials must be >= 2")
+    if not 1 <= args.placements <= 100:
+        raise UsageError(f"--placements: must be in [1, 100], got {args.placements}")
+    if not 1 <= args.digits <= 4:
+        raise UsageError(f"--digits: must be in [1, 4], got {args.digits}")
+    if args.calibration is not None and not Path(args.calibration).is_file():
+        raise UsageError(f"--calibration: {args.calibration!r} is not a file")
+    _set_variant(args.variant)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    cal = ensure_calibration(out, args.calibration, seed=args.seed,
+                             compensate=not args.no_compensate)
+    summary = run_monte_carlo_study(out, calibration=cal, trials=args.trials,
+                                    adaptive=args.adaptive, batch=args.batch, n_dig=args.digits,
+                                    sensitivity_trials=args.sensitivity_trials,
+                                    placements=args.placements, workers=args.workers, **common)
+    print(format_mc(summary))
+    print(f"wrote {out}/ (summary.json, monte-carlo.png, mc/batch_*/results.nc)")
+    return 0
+
+
+def _cmd_study_examples(args) -> int:
+    from lts360.experiments.examples_study import (PAPER_EXAMPLES, format_examples,
+                                                   run_examples_study)
+
+    common = _study_common(args)
+    objects = args.objects.split(",") if args.objects else None
+    for name in objects or ():
+        if name not in PAPER_EXAMPLES:
+            raise UsageError(f"--objects: unknown object {name!r}; choose from "
+                             f"{', '.join(PAPER_EXAMPLES)}")
+    if not 0 < args.section_scale <= 1:
+        raise UsageError(f"--section-scale: must be in (0, 1], got {args.section_scale}")
+    if args.calibration is not None and not Path(args.calibration).is_file():
+        raise UsageError(f"--calibration: {args.calibration!r} is not a file")
+    _set_variant(args.variant)
+    table = run_examples_study(args.out, objects=objects, noise=args.noise, spp=args.spp,
+                               calibration=args.calibration, section_scale=args.section_scale,
+                               workers=args.workers or 1, **common)
+    print(format_examples(table))
+    print(f"wrote {args.out}/ (table.txt, clouds/*.ply, figures/*.png, trials/results.nc)")
+    return 0
+
+
+def _cmd_study_algorithms(args) -> int:
+    from lts360.experiments.algorithms import (DEFAULT_OBJECTS, format_algorithms,
+                                               run_algorithms_study)
+    from lts360.scenes.objects import object_types
+
+    common = _study_common(args)
+    objects = args.objects.split(",") if args.objects else list(DEFAULT_OBJECTS)
+    for name in objects:
+        if name not in object_types():
+            raise UsageError(f"--objects: unknown object {name!r}")
+    if not 1 <= args.repeats <= 1000:
+        raise UsageError(f"--repeats: must be in [1, 1000], got {args.repeats}")
+    _set_variant(args.variant)
+    table = run_algorithms_study(args.out, objects=objects, repeats=args.repeats,
+                                 workers=args.workers or 1, **common)
+    print(format_algorithms(table))
+    print(f"wrote {args.out}/ (table.txt, table.json, trials/results.nc)")
+    return 0
+
+
+def _cmd_study_design_space(args) -> int:
+    from lts360.experiments.design_space import (format_design_space, parse_range,
+                                                 run_design_space_study)
+
+    common = _study_common(args)
+    try:
+        alpha, beta = parse_range(args.alpha_deg), parse_range(args.beta_deg)
+    except ValueError as exc:
+        raise UsageError(f"--alpha-deg/--beta-deg: {exc}") from None
+    if args.draws == 1 or not 0 <= args.draws <= 10000:
+        raise UsageError(f"--draws: must be 0 (geometry only) or in [2, 10000], got {args.draws}")
+    if not 0 < args.scale <= 1:
+        raise UsageError(f"--scale: must be in (0, 1], got {args.scale}")
+    _set_variant(args.variant)
+    summary = run_design_space_study(args.out, alpha_deg=alpha, beta_deg=beta, draws=args.draws,
+                                     spp=args.spp, scale=args.scale, workers=args.workers or 1,
+                                     **common)
+    print(format_design_space(summary))
+    print(f"wrote {args.out}/ (README.md, summary.json, grid.nc, design-space-*.png)")
+    return 0
+
+
 def _cmd_demo(args) -> int:
     from lts360.experiments.demo import run_demo
 
@@ -224,7 +395,10 @@ def _cmd_demo(args) -> int:
     render = not args.no_render
     if render:
         _set_variant(args.variant)
-    run_demo(Path(args.out), radius_mm=args.radius_mm, render=render)
+    if not 1 <= args.gauge_trials <= 1000:
+        raise UsageError(f"--gauge-trials: must be in [1, 1000], got {args.gauge_trials}")
+    run_demo(Path(args.out), radius_mm=args.radius_mm, render=render, paper=not args.quick,
+             gauge_trials=args.gauge_trials, seed=args.seed)
     return 0
 
 
@@ -302,11 +476,105 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="metrics.json")
     s.set_defaults(func=_cmd_score)
 
+    s = sub.add_parser("calibrate", help="calibrate camera, mirrors and laser plane from "
+                       "chessboard images (rendered, or yours with --images)")
+    s.add_argument("--out", required=True, help="output directory (calibration.json, report.json, "
+                   "fig8.png, images/)")
+    s.add_argument("--rig", default="paper", help="rig to render: 'paper' or a TOML file")
+    s.add_argument("--noise", choices=("none", "realistic"), default="none")
+    s.add_argument("--seed", type=int, default=0, help="seeds the poses, the renderer and the noise")
+    s.add_argument("--images", default=None, help="a folder of real images with manifest.json: "
+                   "nothing is rendered")
+    s.add_argument("--spp", type=int, default=64, help="samples per pixel of the rendered images")
+    s.add_argument("--camera-poses", type=int, default=20)
+    s.add_argument("--mirror-poses", type=int, default=6, help="per mirror")
+    s.add_argument("--laser-poses", type=int, default=6)
+    s.add_argument("--board", default="7x6x2", help="mirror/laser board: squares x, squares y, "
+                   "side mm (paper: 7x6x2)")
+    s.add_argument("--camera-board", default=None, help="camera board (default 9x7x8)")
+    s.add_argument("--tangential", action="store_true", help="estimate the tangential "
+                   "distortion p1, p2 as well (default: k1, k2 only)")
+    s.add_argument("--pinhole", action="store_true", help="render the images without depth of "
+                   "field (the limit of a fully stopped-down lens)")
+    s.add_argument("--variant", default=None, help="Mitsuba variant (default llvm_ad_mono)")
+    s.set_defaults(func=_cmd_calibrate)
+
+    s = sub.add_parser("study", help="the studies: plug-gauge, examples, design-space, "
+                       "monte-carlo, algorithms")
+    studies = s.add_subparsers(dest="study", metavar="STUDY", parser_class=_Parser)
+    studies.required = True
+
+    def study_parser(name, help_text):
+        q = studies.add_parser(name, help=help_text)
+        q.add_argument("--out", required=True, help="output directory (results, figures, README)")
+        q.add_argument("--seed", type=int, default=0)
+        q.add_argument("--workers", type=int, default=None, help="local processes")
+        q.add_argument("--dask", default=None, metavar="ADDRESS",
+                       help="run the trials on a Dask distributed scheduler")
+        q.add_argument("--variant", default=None, help="Mitsuba variant (default llvm_ad_mono)")
+        return q
+
+    q = study_parser("plug-gauge", "paper §4.5: the gauge placed N times, measured with an "
+                     "estimated calibration; the paper's table beside ours")
+    q.add_argument("--trials", type=int, default=10)
+    q.add_argument("--calibration", default=None, help="calibration.json (default: calibrate "
+                   "from rendered images into OUT/calibration/)")
+    q.add_argument("--noise", choices=("none", "realistic"), default="realistic")
+    q.add_argument("--spp", type=int, default=16)
+    q.set_defaults(func=_cmd_study_plug_gauge)
+
+    q = study_parser("monte-carlo", "GUM Supplement 1 Monte Carlo of the gauge radius, GUM "
+                     "budget, sensitivity ranking, speckle limit")
+    q.add_argument("--calibration", default=None, help="calibration.json with uncertainties "
+                   "(default: calibrate from rendered images into OUT/calibration/)")
+    q.add_argument("--trials", type=int, default=1000, help="M for the fixed-M procedure")
+    q.add_argument("--adaptive", action="store_true", help="JCGM 101 §7.9 adaptive procedure")
+    q.add_argument("--digits", type=int, default=2, help="significant digits of u(y) the "
+                   "adaptive procedure must stabilise")
+    q.add_argument("--batch", type=int, default=100)
+    q.add_argument("--sensitivity-trials", type=int, default=50,
+                   help="trials per input in the one-at-a-time runs")
+    q.add_argument("--placements", type=int, default=8, help="rendered gauge placements")
+    q.add_argument("--no-compensate", action="store_true", help="no §4.4 compensation")
+    q.set_defaults(func=_cmd_study_monte_carlo)
+
+    q = study_parser("examples", "paper §4.6: the eight objects scanned with the paper's "
+                     "sections and pitch, clouds, figures, error table")
+    q.add_argument("--objects", default=None, help="comma-separated subset (default: all eight)")
+    q.add_argument("--noise", choices=("none", "realistic"), default="realistic")
+    q.add_argument("--spp", type=int, default=16)
+    q.add_argument("--calibration", default=None, help="measure with this calibration "
+                   "(default: the frames' true one)")
+    q.add_argument("--section-scale", type=float, default=1.0,
+                   help="fraction of the paper's sections to scan (quick looks)")
+    q.set_defaults(func=_cmd_study_examples)
+
+    q = study_parser("design-space", "α/β sweep: coverage, overlap, multiple reflections, "
+                     "Monte Carlo radius uncertainty, heat maps, optimum")
+    q.add_argument("--alpha-deg", default="20:70:5", help="START:STOP:STEP (inclusive) or a value")
+    q.add_argument("--beta-deg", default="60:120:5", help="START:STOP:STEP (inclusive) or a value")
+    q.add_argument("--draws", type=int, default=16, help="noise/speckle draws per rig (0: "
+                   "geometry only)")
+    q.add_argument("--spp", type=int, default=16)
+    q.add_argument("--scale", type=float, default=1.0, help="image scale (quick looks)")
+    q.set_defaults(func=_cmd_study_design_space)
+
+    q = study_parser("algorithms", "inverse vs classic triangulation and the three detectors "
+                     "on the same images: bias, std, coverage, time")
+    q.add_argument("--objects", default=None, help="comma-separated (default: plug-gauge, "
+                   "alu-pipe, grooved-shaft, cable-8, cube)")
+    q.add_argument("--repeats", type=int, default=3, help="noise draws per object and level")
+    q.set_defaults(func=_cmd_study_algorithms)
+
     s = sub.add_parser("demo", help="run the main job: rig, coverage, objects, figures")
     s.add_argument("--out", default="lts360-demo", help="output directory (default ./lts360-demo)")
     s.add_argument("--radius-mm", type=float, default=10.0, help="section radius for the coverage")
     s.add_argument("--variant", default=None, help="Mitsuba variant (default llvm_ad_mono)")
     s.add_argument("--no-render", action="store_true", help="skip the rendered frames")
+    s.add_argument("--quick", action="store_true", help="skip the calibration and the "
+                   "plug-gauge study (a few seconds instead of minutes)")
+    s.add_argument("--gauge-trials", type=int, default=10, help="plug-gauge placements")
+    s.add_argument("--seed", type=int, default=0)
     s.set_defaults(func=_cmd_demo)
     return p
 

@@ -21,6 +21,17 @@ def run(*args):
     (("rig", "--coverage", "--radius-mm", "-3"), "--radius-mm"),
     (("rig", "--radius-mm", "abc"), "--radius-mm"),
     (("frobnicate",), "frobnicate"),
+    (("calibrate", "--out", "c", "--images", "no-such-dir"), "--images"),
+    (("calibrate", "--out", "c", "--board", "7x6"), "--board"),
+    (("calibrate", "--out", "c", "--laser-poses", "1"), "--laser-poses"),
+    (("study", "plug-gauge", "--out", "s", "--trials", "0"), "--trials"),
+    (("study", "plug-gauge", "--out", "s", "--calibration", "nope.json"), "--calibration"),
+    (("study", "design-space", "--out", "s", "--alpha-deg", "40:20:5"), "--alpha-deg"),
+    (("study", "design-space", "--out", "s", "--draws", "1"), "--draws"),
+    (("study", "monte-carlo", "--out", "s", "--trials", "1"), "--trials"),
+    (("study", "examples", "--out", "s", "--objects", "teapot"), "teapot"),
+    (("study", "algorithms", "--out", "s", "--workers", "2", "--dask", "tcp://x:1"), "--dask"),
+    (("study", "nonsense", "--out", "s"), "nonsense"),
 ])
 def test_usage_errors_are_one_line_exit_2(args, field, tmp_path):
     proc = subprocess.run([sys.executable, "-m", "lts360.cli", *args], capture_output=True,
@@ -33,9 +44,13 @@ def test_usage_errors_are_one_line_exit_2(args, field, tmp_path):
 
 
 def test_help_for_every_command():
-    for cmd in ("objects", "object", "rig", "demo"):
+    for cmd in ("objects", "object", "rig", "render", "measure", "score", "calibrate", "study",
+                "demo"):
         proc = run(cmd, "--help")
         assert proc.returncode == 0 and "usage: lts360" in proc.stdout
+    for study in ("plug-gauge", "examples", "design-space", "monte-carlo", "algorithms"):
+        proc = run("study", study, "--help")
+        assert proc.returncode == 0 and "--seed" in proc.stdout and "--dask" in proc.stdout
 
 
 def test_object_writes_a_watertight_mesh(tmp_path, capsys):

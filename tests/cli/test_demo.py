@@ -5,9 +5,12 @@ import subprocess
 import sys
 
 
+import pytest
+
+
 def test_demo_writes_rig_objects_frames_and_scores(tmp_path):
     out = tmp_path / "demo"
-    proc = subprocess.run([sys.executable, "-m", "lts360.cli", "demo", "--out", str(out)],
+    proc = subprocess.run([sys.executable, "-m", "lts360.cli", "demo", "--quick", "--out", str(out)],
                           capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     assert "total: 360.0° of 360°" in proc.stdout
@@ -22,3 +25,23 @@ def test_demo_writes_rig_objects_frames_and_scores(tmp_path):
         m = json.loads((d / "metrics.json").read_text())
         assert m["coverage_deg"] > 355.0 and abs(m["radius_bias_mm"]) < 0.01
     assert not list(tmp_path.glob(".*partial"))  # no half-written output left behind
+
+
+@pytest.mark.slow
+def test_the_full_demo_calibrates_and_runs_the_plug_gauge_study(tmp_path):
+    """The README's main job as a user runs it (minutes): calibration from rendered images,
+    the gauge placed and measured, the paper's table beside ours."""
+    out = tmp_path / "demo"
+    proc = subprocess.run([sys.executable, "-m", "lts360.cli", "demo", "--gauge-trials", "3",
+                           "--out", str(out)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert "expanded uncertainty U (k = 2)" in proc.stdout
+    for name in ("calibration/calibration.json", "calibration/report.json", "calibration/fig8.png",
+                 "plug-gauge/table.json", "plug-gauge/plug-gauge.png",
+                 "plug-gauge/trials/results.nc"):
+        assert (out / name).is_file(), name
+    assert len(list((out / "plug-gauge" / "clouds").glob("*.ply"))) == 3
+    table = json.loads((out / "plug-gauge" / "table.json").read_text())
+    assert table["n_measurements"] == 3 and table["mean_coverage_deg"] > 350.0
+    # The estimated calibration is good enough that the gauge is within 0.1 mm.
+    assert abs(table["mean_radius_error_mm"]) < 0.1
