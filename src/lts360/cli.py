@@ -190,13 +190,13 @@ def _cmd_measure(args) -> int:
 
 def _cmd_score(args) -> int:
 
-    from lts360.experiments.score import load_truth, score_cloud
+    from lts360.experiments.score import load_rig_truth, load_truth, score_cloud
     from lts360.recon.cloud import read_cloud
     from lts360.simulator.io import write_json
 
     cloud = read_cloud(args.cloud)
     obj, _ = load_truth(args.truth)
-    metrics = score_cloud(cloud, obj)
+    metrics = score_cloud(cloud, obj, rig_truth=load_rig_truth(args.truth))
     out = Path(args.out)
     if not out.parent.exists():
         raise UsageError(f"--out: directory {str(out.parent)!r} does not exist")
@@ -205,7 +205,11 @@ def _cmd_score(args) -> int:
     print(f"{obj.name}: {metrics['n_points']} points, coverage {metrics['coverage_deg']:.1f}°, "
           f"truth {metrics['truth']}")
     print(f"  rms {fmt(metrics['rms_mm'])}, mean {fmt(metrics['mean_mm'])}, "
-          f"max |e| {fmt(metrics['max_abs_mm'])}, p95 {fmt(metrics['p95_mm'])}")
+          f"max |e| {fmt(metrics['max_abs_mm'])}, p95 {fmt(metrics['p95_mm'])}; normal distance "
+          f"to the mesh: rms {fmt(metrics['mesh_distance']['rms_mm'])}")
+    if metrics.get("n_spurious"):
+        print(f"  {metrics['n_spurious']} spurious points where the true surface is hidden or "
+              f"unlit (rms {fmt(metrics['spurious']['rms_mm'])}): counted as missing coverage")
     for view, row in metrics["views"].items():
         print(f"  {view:10s} n={row['n']:6d} rms {fmt(row['rms_mm'])} mean {fmt(row['mean_mm'])} "
               f"coverage {row['coverage_deg']:.1f}°")

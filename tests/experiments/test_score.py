@@ -66,3 +66,29 @@ def test_cloud_ply_round_trip_and_trimesh_reads_it(tmp_path):
     with pytest.raises(ValueError, match="not a PLY"):
         (tmp_path / "x.ply").write_text("hello")
         read_cloud(tmp_path / "x.ply")
+
+
+def test_measurable_knows_which_side_of_the_gauge_each_view_sees():
+    """The direct view sees the front (−Y, towards the camera) of a cylinder, not its back; the
+    mirrors (behind it, at +Y) see the back.  Lit: the laser is at −Y, the mirrors relight the
+    back."""
+    import json
+
+    from lts360.experiments.score import measurable
+    from lts360.recon.cloud import VIEW_CODES
+    from lts360.scenes.objects import build_object
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.io import rig_truth
+
+    rig = load_rig("paper")
+    truth = json.loads(json.dumps(rig_truth(rig, rig.camera.K, (1280, 1024)),
+                                  default=lambda v: v.tolist()))
+    obj = build_object("plug-gauge")
+    r = obj.params["diameter_mm"] / 2
+    th = np.radians([-90.0, 90.0])  # front (facing the camera) and back
+    pts = np.column_stack([r * np.cos(th), r * np.sin(th), np.zeros(2)])
+    direct = measurable(pts, np.full(2, VIEW_CODES["direct"]), obj, truth)
+    assert direct.tolist() == [True, False]
+    back_left = measurable(pts[1:], np.array([VIEW_CODES["left"]]), obj, truth)
+    front_left = measurable(pts[:1], np.array([VIEW_CODES["left"]]), obj, truth)
+    assert back_left.tolist() == [True] and front_left.tolist() == [False]

@@ -52,7 +52,7 @@ def _measure_frames(root: Path, obj, echo) -> dict:
         cloud = measure_sections(collect_sections([d]), cal, grid)
         dt = time.perf_counter() - t0
         write_cloud(d / "cloud.ply", cloud)
-        m = score_cloud(cloud, obj)
+        m = score_cloud(cloud, obj, rig_truth=json.loads((d / "frame.json").read_text()))
         m["measure_seconds"] = dt
         write_json(d / "metrics.json", m)
         views = [m["views"].get(v, {}).get("rms_mm") for v in ("direct", "left", "right")]

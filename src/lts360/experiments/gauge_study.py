@@ -116,6 +116,7 @@ def measure_gauge_image(image, cal_path: str, *, r_true_mm: float, band_mm: floa
     theta = np.degrees(np.arctan2(*(pts - fit.center_mm).T[::-1])) % 360.0
     gaps = np.diff(np.append(np.sort(theta), np.sort(theta)[0] + 360.0))
     out.update(radius_error_mm=float(fit.radius_mm - r_true_mm), point_std_mm=float(r.std()),
+               form_range_mm=float(r.max() - r.min()),
                point_rms_mm=float(np.sqrt(np.mean((r - r_true_mm) ** 2))),
                max_abs_error_mm=float(np.abs(r - r_true_mm).max()),
                coverage_deg=float(np.minimum(gaps, 0.5).sum()),
@@ -164,7 +165,13 @@ def gauge_table(ds) -> dict:
     s_worst = float(np.nanmax(std))
     U = 2.0 * math.sqrt(s_worst**2 + u_t**2 + u_res**2)
     mean = float(np.nanmean(err))
-    return {"n_measurements": int(np.isfinite(err).sum()), "mean_radius_error_mm": mean,
+    vdi = {}
+    if "form_range_mm" in ds:
+        # VDI/VDE 2634-2 style: probing error form P_F (range of the radial residuals about the
+        # fitted circle) and size P_S (diameter error), the worst over the placements.
+        vdi = {"probing_form_PF_mm": float(np.nanmax(ds["form_range_mm"].values)),
+               "probing_size_PS_mm": float(2.0 * err[np.nanargmax(np.abs(err))])}
+    return {**vdi, "n_measurements": int(np.isfinite(err).sum()), "mean_radius_error_mm": mean,
             "std_of_radius_error_mm": float(np.nanstd(err, ddof=1)) if err.size > 1 else None,
             "worst_std_mm": s_worst, "temperature_mm": temp_mm, "resolution_mm": RESOLUTION_MM,
             "expanded_uncertainty_mm": U, "max_error_mm": abs(mean) + U,
@@ -181,6 +188,11 @@ def format_gauge_table(ours: dict) -> str:
     lines = [f"{'plug gauge Ø19.9987 mm (mm)':38s} {'paper':>9s} {'lts360':>9s}"]
     for label, key, fmt in rows:
         lines.append(f"{label:38s} {fmt.format(PAPER_TABLE[key]):>9s} {fmt.format(ours[key]):>9s}")
+    if "probing_form_PF_mm" in ours:
+        lines.append(f"{'VDI/VDE 2634-2: probing form P_F (worst)':38s} {'—':>9s} "
+                     f"{ours['probing_form_PF_mm']:9.4f}")
+        lines.append(f"{'VDI/VDE 2634-2: probing size P_S (worst)':38s} {'—':>9s} "
+                     f"{ours['probing_size_PS_mm']:+9.4f}")
     lines.append(f"(ours: {ours['n_measurements']} placements, mean coverage "
                  f"{ours['mean_coverage_deg']:.1f}°; the paper's temperature term is its own "
                  "figure, ours is α·d·ΔT for steel)")

@@ -22,7 +22,85 @@ from lts360.geometry.fit import fit_circle
 from lts360.recon.cloud import VIEW_NAMES, Cloud
 from lts360.scenes.objects import SceneObject, build_object
 
-__all__ = ["load_truth", "signed_mesh_distance", "score_cloud", "error_stats"]
+__all__ = ["load_truth", "load_rig_truth", "signed_mesh_distance", "score_cloud", "error_stats",
+           "measurable"]
+
+
+def measurable(points_mm: np.ndarray, view_codes: np.ndarray, obj: SceneObject, rig_truth: dict,
+               *, clearance_mm: float = 1e-4) -> np.ndarray:
+    """Whether the *true* surface point at each measured point's (θ, z) could be measured by the
+    point's view: seen by that view's (virtual) camera and lit by the laser (directly or through
+    a mirror), with the object mesh as the only occluder (Open3D ray casting).
+
+    A point measured where this is false is *spurious*: the true surface there is hidden (the
+    valleys between a cable's strands, the inside of a groove) and the detector found the
+    sheet's tail on a neighbouring flank.  Such θ are missing coverage, not measurement error.
+
+    ``rig_truth`` is a frame's ``frame.json`` (camera centre, mirror planes, laser apex, world
+    frame).  Points are in the un-staged object placement (see the module docstring), so the
+    rig is moved by each point's ``z``.
+    """
+    import open3d as o3d
+
+    from lts360.geometry.mirror import reflect_points
+
+    pts = np.asarray(points_mm, dtype=float).reshape(-1, 3)
+    if obj.radius_fn is None or len(pts) == 0:
+        return np.ones(len(pts), bool)
+    T = obj.T_world_object
+    local = obj.to_object_frame(pts)
+    th = np.arctan2(local[:, 1], local[:, 0])
+    r = obj.true_radius_at(pts)
+    ok = np.isfinite(r)
+    radial = np.column_stack([np.cos(th), np.sin(th), np.zeros_like(th)])
+    surf_local = radial * np.where(ok, r, 0.0)[:, None] + np.column_stack(
+        [np.zeros((len(pts), 2)), local[:, 2]])
+    start = (surf_local + radial * 0.005) @ T[:3, :3].T + T[:3, 3]  # 5 µm outside the surface
+    z = pts[:, 2:3] * np.array([[0.0, 0.0, 1.0]])
+    mirrors = {m["name"]: (np.asarray(m["n"], float), float(m["d"])) for m in rig_truth["mirrors"]}
+    cam = np.asarray(rig_truth["camera"]["center_mm"], float)
+    apex = np.asarray(rig_truth["laser"]["origin_mm"], float)
+
+    def virtual(p, seq):
+        p = p.reshape(1, 3)
+        for name in seq:
+            p = reflect_points(p, *mirrors[name])
+        return p.ravel()
+
+    scene = o3d.t.geometry.RaycastingScene()
+    mesh = obj.mesh_world()
+    scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, dtype=np.float32)),
+                        o3d.core.Tensor(np.asarray(mesh.faces, dtype=np.uint32)))
+
+    def clear(targets: np.ndarray) -> np.ndarray:
+        d = targets - start
+        dist = np.linalg.norm(d, axis=1)
+        u = d / dist[:, None]
+        rays = np.concatenate([start, u], axis=1).astype(np.float32)
+        hit = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+        return ~((hit > clearance_mm) & (hit < dist))
+
+    names = {code: VIEW_NAMES.get(int(code), str(code)) for code in np.unique(view_codes)}
+    seen = np.zeros(len(pts), bool)
+    for code, name in names.items():
+        m = view_codes == code
+        seq = () if name == "direct" else tuple(name.split("-"))
+        if not all(s in mirrors for s in seq):
+            seen[m] = True
+            continue
+        # The view's camera as seen from the point: the camera mirrored through the mirrors in
+        # the reverse order of the path (point → first mirror → ... → camera).
+        centre = virtual(cam, seq[::-1]) if seq else cam
+        seen[m] = _clear_subset(clear, centre, z, m)[m]
+    lit = np.zeros(len(pts), bool)
+    for seq in [(), *[(n,) for n in mirrors]]:
+        lit |= _clear_subset(clear, virtual(apex, seq) if seq else apex, z, np.ones(len(pts), bool))
+    return ok & seen & lit
+
+
+def _clear_subset(clear, centre: np.ndarray, z: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``clear`` towards ``centre`` (moved by each point's z) for the masked points."""
+    return clear(centre[None, :] + z) & mask
 
 
 def load_truth(truth_dir) -> tuple[SceneObject, list[float]]:
@@ -39,6 +117,15 @@ def load_truth(truth_dir) -> tuple[SceneObject, list[float]]:
     if len(specs) != 1:
         raise ValueError(f"--truth: the frames hold different objects: {sorted(specs)}")
     return build_object(specs.pop()), [float(f["stage"]["z_mm"]) for f in frames]
+
+
+def load_rig_truth(truth_dir) -> dict:
+    """The ``frame.json`` of a frame directory, or of the first section of a scan directory."""
+    d = Path(truth_dir)
+    if (d / "scan.json").is_file():
+        first = json.loads((d / "scan.json").read_text())["sections"][0]["dir"]
+        return json.loads((d / first / "frame.json").read_text())
+    return json.loads((d / "frame.json").read_text())
 
 
 def signed_mesh_distance(mesh, points_mm: np.ndarray) -> np.ndarray:
@@ -81,8 +168,15 @@ def _coverage_deg(theta: np.ndarray, section: np.ndarray, bin_deg: float) -> flo
 
 
 def score_cloud(cloud: Cloud, obj: SceneObject, *, theta_bin_deg: float = 0.5,
-                use_mesh: bool = True) -> dict:
-    """Metrics of a cloud against an object's truth (see module docstring)."""
+                use_mesh: bool = True, rig_truth: dict | None = None) -> dict:
+    """Metrics of a cloud against an object's truth (see module docstring).
+
+    With ``rig_truth`` (a frame's ``frame.json``), points whose true surface point is hidden
+    from their view or unlit (:func:`measurable`) are *spurious*: they are counted and scored
+    apart (``n_spurious``, ``spurious``) and left out of the error statistics and the coverage,
+    so that occlusions show as missing coverage, not as error; ``all_points`` keeps the
+    statistics of every valid point.
+    """
     valid = cloud.valid
     c = cloud.select(valid)
     pts = c.points_mm
@@ -90,9 +184,16 @@ def score_cloud(cloud: Cloud, obj: SceneObject, *, theta_bin_deg: float = 0.5,
     mesh_err = signed_mesh_distance(obj.mesh_world(), pts) if use_mesh and len(pts) else \
         np.full(len(pts), np.nan)
     primary = analytic if np.isfinite(analytic).any() else mesh_err
+    extra = {}
+    if rig_truth is not None and len(pts):
+        keep = measurable(pts, c.view, obj, rig_truth)
+        extra = {"n_spurious": int((~keep).sum()), "spurious": error_stats(primary[~keep]),
+                 "all_points": error_stats(primary)}
+        c, pts = c.select(keep), pts[keep]
+        analytic, mesh_err, primary = analytic[keep], mesh_err[keep], primary[keep]
     out = {"object": obj.spec, "n_points": int(len(pts)), "n_theta_samples": int(len(cloud)),
            "truth": "analytic r(θ, z)" if np.isfinite(analytic).any() else "mesh distance",
-           "coverage_deg": _coverage_deg(c.theta_rad, c.section, theta_bin_deg)}
+           "coverage_deg": _coverage_deg(c.theta_rad, c.section, theta_bin_deg), **extra}
     out.update(error_stats(primary))
     out["mesh_distance"] = error_stats(mesh_err)
     out["analytic"] = error_stats(analytic)
