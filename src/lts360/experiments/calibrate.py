@@ -44,20 +44,25 @@ def calibration_accuracy(cal: Calibration, truth: dict, result: RigCalibrationRe
                       "cx_px": float(K[0, 2] - Kt[0, 2]), "cy_px": float(K[1, 2] - Kt[1, 2]),
                       "dist": (cal.dist - t.dist).tolist()}}
 
-    def plane_err(n, d, nt, dt):
+    def plane_err(n, d, nt, dt, at):
+        """Angle, offset along the normal at the camera (``d``), and the distance of the true
+        plane's point ``at`` (where the plane is used) from the estimated plane."""
+        n = np.asarray(n, float)
         if np.dot(n, nt) < 0:
-            n, d = -np.asarray(n), -d
-        return {"normal_deg": _angle_deg(n, nt), "offset_um": 1e3 * (float(d) - float(dt))}
+            n, d = -n, -d
+        return {"normal_deg": _angle_deg(n, nt), "offset_um": 1e3 * (float(d) - float(dt)),
+                "offset_at_use_um": 1e3 * (float(d) - float(n @ at))}
 
     out["mirrors"] = {}
     for m in cal.mirrors:
         mt = t.mirror(m.name)
-        row = {"lsq": plane_err(m.n, m.d_mm, mt.n, mt.d_mm)}
+        centre = mt.corners_mm.mean(axis=0) if mt.corners_mm is not None else mt.d_mm * mt.n
+        row = {"lsq": plane_err(m.n, m.d_mm, mt.n, mt.d_mm, centre)}
         if result is not None and m.name in result.mirror_midpoint:
             e = result.mirror_midpoint[m.name]
-            row["midpoint"] = plane_err(e.normal, e.d_mm, mt.n, mt.d_mm)
+            row["midpoint"] = plane_err(e.normal, e.d_mm, mt.n, mt.d_mm, centre)
         out["mirrors"][m.name] = row
-    out["laser_plane"] = plane_err(*cal.laser_plane, *t.laser_plane)
+    out["laser_plane"] = plane_err(*cal.laser_plane, *t.laser_plane, t.T_cam_meas[:3, 3])
     T, Tt = cal.T_cam_meas, t.T_cam_meas
     out["measurement_frame"] = {
         "origin_um": (1e3 * Tt[:3, :3].T @ (T[:3, 3] - Tt[:3, 3])).tolist(),
@@ -231,14 +236,19 @@ def format_report(report: dict) -> str:
         a = acc["camera"]
         lines.append(f"vs truth: fx {a['fx_rel_percent']:+.4f} %, fy {a['fy_rel_percent']:+.4f} %, "
                      f"cx {a['cx_px']:+.3f} px, cy {a['cy_px']:+.3f} px")
+        lines.append("  planes: normal angle; offset d (at the camera); offset at the mirror "
+                     "centre / the axis")
         for name, row in acc["mirrors"].items():
-            s = f"  mirror {name}: LSQ {row['lsq']['normal_deg']:.4f}° {row['lsq']['offset_um']:+.1f} µm"
+            s = (f"  mirror {name}: LSQ {row['lsq']['normal_deg']:.4f}° "
+                 f"{row['lsq']['offset_um']:+.1f} µm / {row['lsq']['offset_at_use_um']:+.1f} µm")
             if "midpoint" in row:
                 s += (f"; midpoint (paper) {row['midpoint']['normal_deg']:.4f}° "
-                      f"{row['midpoint']['offset_um']:+.1f} µm")
+                      f"{row['midpoint']['offset_um']:+.1f} / "
+                      f"{row['midpoint']['offset_at_use_um']:+.1f} µm")
             lines.append(s)
         lp = acc["laser_plane"]
-        lines.append(f"  laser plane: {lp['normal_deg']:.4f}° {lp['offset_um']:+.1f} µm")
+        lines.append(f"  laser plane: {lp['normal_deg']:.4f}° {lp['offset_um']:+.1f} µm / "
+                     f"{lp['offset_at_use_um']:+.1f} µm")
         mf = acc["measurement_frame"]
         lines.append("  measurement frame origin (µm): "
                      + ", ".join(f"{v:+.1f}" for v in mf["origin_um"])
