@@ -82,10 +82,11 @@ def test_the_images_folder_alone_reproduces_the_calibration(calibrated, tmp_path
     report = run_calibrate(tmp_path, images_dir=out / "images", say=lambda *_: None)
     assert "accuracy" not in report  # no truth beside real images
     a, b = load_calibration(out / "calibration.json"), load_calibration(tmp_path / "calibration.json")
-    # Same files, same numbers — up to OpenCV's multithreaded summation order (~1e-9).
-    np.testing.assert_allclose(a.K, b.K, rtol=1e-7)
-    np.testing.assert_allclose(a.laser_plane[0], b.laser_plane[0], atol=1e-7)
-    assert abs(a.laser_plane[1] - b.laser_plane[1]) < 1e-6
+    # Same files, same numbers — up to OpenCV's multithreaded summation order: measured
+    # differences of 1e-9 to 2e-7 in the normals between runs (1e-5 rad is 0.0006°).
+    np.testing.assert_allclose(a.K, b.K, rtol=1e-6)
+    np.testing.assert_allclose(a.laser_plane[0], b.laser_plane[0], atol=1e-5)
+    assert abs(a.laser_plane[1] - b.laser_plane[1]) < 1e-3
 
 
 def test_a_manifest_without_design_or_with_missing_images_fails_clearly(tmp_path):
