@@ -40,6 +40,7 @@ from lts360.recon.calibration import Calibration, MirrorPlane, make_T_cam_meas
 from lts360.recon.camera_calibration import BoardGeometry, CameraCalibration, calibrate_camera
 from lts360.recon.laser_calibration import (LaserLine, LaserPlaneEstimate, fit_laser_plane,
                                             laser_line_points)
+from lts360.recon.measure import read_image as _read
 from lts360.recon.mirror_calibration import (MirrorEstimate, MirrorObservation,
                                              detect_real_and_virtual, mirror_from_midpoints,
                                              refine_mirror, robust_refine_mirror)
@@ -116,17 +117,6 @@ def read_calibration_images(folder) -> CalibrationImages:
                                  "is missing")
     return CalibrationImages(root=root, board=board, camera_board=camera_board, design=dict(data.get("design") or {}),
                              shots=shots)
-
-
-def _read(path: Path) -> np.ndarray:
-    import cv2
-
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise ValueError(f"cannot read image {str(path)!r}")
-    if img.ndim == 3:
-        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
-    return img
 
 
 def measurement_frame_from_mirrors(mirrors: dict[str, MirrorPlane], laser_plane,

@@ -38,7 +38,7 @@ from lts360.recon.peaks import PeakResult, Quality, detect_peaks
 from lts360.recon.views import (DEFAULT_MAX_INCIDENCE_DEG, DIRECT, View, get_views,
                                 project_meas_points, view_windows)
 
-__all__ = ["ViewPlan", "InversePlan", "ViewResult", "FusedCloud", "InverseResult",
+__all__ = ["ViewPlan", "InversePlan", "ViewResult", "FusedCloud", "InverseResult", "raw_view_points",
            "plan_inverse", "project_grid", "sample_profiles", "assemble_view",
            "inverse_triangulate", "estimate_view_offsets", "default_threshold",
            "default_saturation", "DEFAULT_ACCEPT", "DEFAULT_THRESHOLD_FRACTION"]
@@ -514,6 +514,29 @@ def inverse_triangulate(image, cal: Calibration, grid: CylGrid, *, views=None, w
                          compensated=bool(compensate), accept=tuple(Quality(q) for q in accept))
 
 
+def raw_view_points(result: InverseResult, *, reference: str = DIRECT,
+                    min_points: int = 10) -> dict[str, np.ndarray]:
+    """Each view's uncompensated (x, y) points (measurement frame, accepted qualities) of a
+    round section, for the residual compensation of paper §4.4.
+
+    Raises
+    ------
+    ValueError
+        No ``reference`` view, or a view with fewer than ``min_points`` valid points.
+    """
+    if reference not in result.views:
+        raise ValueError(f"reference: no view {reference!r} in the result ({list(result.views)})")
+    accept = [int(q) for q in result.accept]
+    out = {}
+    for name, v in result.views.items():
+        ok = np.isfinite(v.r_raw_mm) & np.isin(v.quality, accept)
+        if ok.sum() < min_points:
+            raise ValueError(f"view {name!r}: {int(ok.sum())} valid points, a circle fit needs "
+                             f"at least {min_points}")
+        out[name] = v.raw_points_meas_mm[ok, :2]
+    return out
+
+
 def estimate_view_offsets(result: InverseResult, *, reference: str = DIRECT,
                           min_points: int = 10) -> dict[str, np.ndarray]:
     """Residual compensation of paper §4.4 from the measurement of a round section.
@@ -523,22 +546,14 @@ def estimate_view_offsets(result: InverseResult, *, reference: str = DIRECT,
     is the translation of its centre onto the reference view's centre.  The returned values
     are absolute: store them as ``Calibration.view_offsets_mm``
     (``dataclasses.replace(cal, view_offsets_mm=offsets)``) whatever the result's own
-    compensation was.
+    compensation was.  :func:`lts360.recon.compensation.joint_view_offsets` fits one circle
+    to all views instead (better conditioned for ~150° arcs).
 
     Raises
     ------
     ValueError
         No reference view, or a view with fewer than ``min_points`` valid points.
     """
-    if reference not in result.views:
-        raise ValueError(f"reference: no view {reference!r} in the result ({list(result.views)})")
-
-    def centre(v: ViewResult) -> np.ndarray:
-        ok = np.isfinite(v.r_raw_mm) & np.isin(v.quality, [int(q) for q in result.accept])
-        if ok.sum() < min_points:
-            raise ValueError(f"view {v.name!r}: {int(ok.sum())} valid points, a circle fit needs "
-                             f"at least {min_points}")
-        return fit_circle(v.raw_points_meas_mm[ok, :2]).center_mm
-
-    c_ref = centre(result.views[reference])
-    return {name: c_ref - centre(v) for name, v in result.views.items() if name != reference}
+    pts = raw_view_points(result, reference=reference, min_points=min_points)
+    centres = {name: fit_circle(p).center_mm for name, p in pts.items()}
+    return {name: centres[reference] - c for name, c in centres.items() if name != reference}

@@ -18,7 +18,7 @@ from lts360.recon.cloud import VIEW_CODES, Cloud
 from lts360.recon.grid import CylGrid
 from lts360.recon.inverse import InverseResult, inverse_triangulate, plan_inverse
 
-__all__ = ["Section", "collect_sections", "measure_sections", "result_to_cloud"]
+__all__ = ["Section", "collect_sections", "measure_sections", "result_to_cloud", "read_image"]
 
 
 @dataclass(frozen=True)
@@ -29,7 +29,8 @@ class Section:
     z_mm: float
 
 
-def _read_image(path: Path) -> np.ndarray:
+def read_image(path: Path) -> np.ndarray:
+    """A greyscale image from a file (8 or 16 bit as stored; colour converted to grey)."""
     import cv2
 
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
@@ -112,7 +113,7 @@ def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *
         regions = view_regions(cal, grid)
         items = list(enumerate(sections))
         return Cloud.concatenate([
-            classic_to_cloud(classic_triangulate(_read_image(s.image_path), cal, grid, regions=regions),
+            classic_to_cloud(classic_triangulate(read_image(s.image_path), cal, grid, regions=regions),
                              z_mm=s.z_mm, section=k)
             for k, s in (progress(items) if progress else items)])
     if method != "inverse":
@@ -135,7 +136,7 @@ def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *
     clouds = []
     items = list(enumerate(sections))
     for k, s in (progress(items) if progress else items):
-        img = _read_image(s.image_path)
+        img = read_image(s.image_path)
         if fast is not None:
             res = fast(img, compensate=compensate)
         else:
