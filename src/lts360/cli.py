@@ -267,6 +267,22 @@ def _cmd_calibrate(args) -> int:
     return 0
 
 
+def _objects_arg(text: str | None, allowed, default) -> list[str]:
+    """``--objects a,b,c`` checked against ``allowed`` (``default`` when not given)."""
+    names = text.split(",") if text else list(default)
+    for name in names:
+        if name not in allowed:
+            raise UsageError(f"--objects: unknown object {name!r}; choose from "
+                             f"{', '.join(allowed)}")
+    return names
+
+
+def _optional_file(value, option: str):
+    if value is not None and not Path(value).is_file():
+        raise UsageError(f"{option}: {value!r} is not a file")
+    return value
+
+
 def _study_common(args) -> dict:
     if args.seed < 0:
         raise UsageError(f"--seed: must be >= 0, got {args.seed}")
@@ -286,8 +302,7 @@ def _cmd_study_plug_gauge(args) -> int:
     common = _study_common(args)
     if not 1 <= args.trials <= 10000:
         raise UsageError(f"--trials: must be in [1, 10000], got {args.trials}")
-    if args.calibration is not None and not Path(args.calibration).is_file():
-        raise UsageError(f"--calibration: {args.calibration!r} is not a file")
+    _optional_file(args.calibration, "--calibration")
     _set_variant(args.variant)
     table = run_plug_gauge_study(args.out, trials=args.trials, calibration=args.calibration,
                                  noise=args.noise, spp=args.spp,
@@ -310,8 +325,7 @@ def _cmd_study_monte_carlo(args) -> int:
         raise UsageError(f"--placements: must be in [1, 100], got {args.placements}")
     if not 1 <= args.digits <= 4:
         raise UsageError(f"--digits: must be in [1, 4], got {args.digits}")
-    if args.calibration is not None and not Path(args.calibration).is_file():
-        raise UsageError(f"--calibration: {args.calibration!r} is not a file")
+    _optional_file(args.calibration, "--calibration")
     _set_variant(args.variant)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -331,15 +345,10 @@ def _cmd_study_examples(args) -> int:
                                                    run_examples_study)
 
     common = _study_common(args)
-    objects = args.objects.split(",") if args.objects else None
-    for name in objects or ():
-        if name not in PAPER_EXAMPLES:
-            raise UsageError(f"--objects: unknown object {name!r}; choose from "
-                             f"{', '.join(PAPER_EXAMPLES)}")
+    objects = _objects_arg(args.objects, list(PAPER_EXAMPLES), PAPER_EXAMPLES)
     if not 0 < args.section_scale <= 1:
         raise UsageError(f"--section-scale: must be in (0, 1], got {args.section_scale}")
-    if args.calibration is not None and not Path(args.calibration).is_file():
-        raise UsageError(f"--calibration: {args.calibration!r} is not a file")
+    _optional_file(args.calibration, "--calibration")
     _set_variant(args.variant)
     table = run_examples_study(args.out, objects=objects, noise=args.noise, spp=args.spp,
                                calibration=args.calibration, section_scale=args.section_scale,
@@ -355,10 +364,7 @@ def _cmd_study_algorithms(args) -> int:
     from lts360.scenes.objects import object_types
 
     common = _study_common(args)
-    objects = args.objects.split(",") if args.objects else list(DEFAULT_OBJECTS)
-    for name in objects:
-        if name not in object_types():
-            raise UsageError(f"--objects: unknown object {name!r}")
+    objects = _objects_arg(args.objects, list(object_types()), DEFAULT_OBJECTS)
     if not 1 <= args.repeats <= 1000:
         raise UsageError(f"--repeats: must be in [1, 1000], got {args.repeats}")
     _set_variant(args.variant)
