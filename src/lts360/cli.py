@@ -240,6 +240,8 @@ def _cmd_calibrate(args) -> int:
         raise UsageError(f"--seed: must be >= 0, got {args.seed}")
     if not 1 <= args.spp <= 4096:
         raise UsageError(f"--spp: must be in [1, 4096], got {args.spp}")
+    if args.f_number is not None and not 0.5 <= args.f_number <= 64:
+        raise UsageError(f"--f-number: must be in [0.5, 64], got {args.f_number}")
     if args.camera_poses < 4 or args.mirror_poses < 1 or args.laser_poses < 2:
         raise UsageError("--camera-poses >= 4, --mirror-poses >= 1 and --laser-poses >= 2 needed, "
                          f"got {args.camera_poses}, {args.mirror_poses}, {args.laser_poses}")
@@ -261,7 +263,7 @@ def _cmd_calibrate(args) -> int:
                            images_dir=args.images, spp=args.spp, n_camera=args.camera_poses,
                            n_mirror=args.mirror_poses, n_laser=args.laser_poses, board=board,
                            camera_board=camera_board, tangential=args.tangential,
-                           thin_lens=not args.pinhole)
+                           thin_lens=not args.pinhole, f_number=args.f_number)
     print(format_report(report))
     print(f"wrote {out}/calibration.json, report.json, fig8.png")
     return 0
@@ -496,7 +498,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--images", default=None, help="a folder of real images with manifest.json: "
                    "nothing is rendered")
     s.add_argument("--spp", type=int, default=64, help="samples per pixel of the rendered images")
-    s.add_argument("--camera-poses", type=int, default=20)
+    s.add_argument("--camera-poses", type=int, default=30)
     s.add_argument("--mirror-poses", type=int, default=6, help="per mirror")
     s.add_argument("--laser-poses", type=int, default=6)
     s.add_argument("--board", default="7x6x2", help="mirror/laser board: squares x, squares y, "
@@ -506,6 +508,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "distortion p1, p2 as well (default: k1, k2 only)")
     s.add_argument("--pinhole", action="store_true", help="render the images without depth of "
                    "field (the limit of a fully stopped-down lens)")
+    s.add_argument("--f-number", type=float, default=None, help="aperture of the calibration "
+                   "images (default: the rig's; stopping down sharpens the small boards)")
     s.add_argument("--variant", default=None, help="Mitsuba variant (default llvm_ad_mono)")
     s.set_defaults(func=_cmd_calibrate)
 

@@ -83,3 +83,32 @@ def test_frame_needs_left_and_right():
     cal = _truth()
     with pytest.raises(ValueError, match="'left' and a 'right'"):
         measurement_frame_from_mirrors({"left": cal.mirror("left")}, cal.laser_plane, 60.0)
+
+
+def test_board_pose_leaves_out_a_shifted_column():
+    """A column of corners 0.8 px off (the SB detector next to a narrow margin) must not tilt
+    the board plane: synthetic 7×6 × 2 mm board at 165 mm, exact corners but that column.
+    Guarded: the true pose to 1e-4° (measured ~1e-5°); kept, the column tilts it by 0.8°."""
+    pytest.importorskip("cv2")
+    from scipy.spatial.transform import Rotation
+
+    from lts360.geometry.camera import project_camera_points
+    from lts360.recon.camera_calibration import BoardGeometry
+    from lts360.recon.laser_calibration import board_pose
+
+    geo = BoardGeometry((6, 5), 2.0)
+    K = np.array([[1509.4, 0.0, 639.5], [0.0, 1509.4, 511.5], [0.0, 0.0, 1.0]])
+    R = Rotation.from_euler("xyz", [160.0, 20.0, 10.0], degrees=True).as_matrix()
+    t = np.array([3.0, 12.0, 165.0])
+    uv = project_camera_points(geo.object_points() @ R.T + t, K)
+    bad = uv.reshape(5, 6, 2).copy()
+    bad[:, -1, 0] += 0.8
+    bad = bad.reshape(-1, 2)
+
+    def tilt_deg(Re):
+        return np.degrees(np.arccos(min(1.0, Re[:, 2] @ R[:, 2])))
+
+    Rg, tg = board_pose(bad, geo, K, np.zeros(5))
+    Rn, _ = board_pose(bad, geo, K, np.zeros(5), corner_outlier_px=None)
+    assert tilt_deg(Rg) < 1e-4 and np.allclose(tg, t, atol=1e-4)
+    assert tilt_deg(Rn) > 0.3

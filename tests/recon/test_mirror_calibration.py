@@ -86,9 +86,10 @@ def _synthetic_mirror_shots(seed=3, n=6, noise_px=0.03):
 def test_refine_mirror_leaves_out_a_shifted_column_of_corners():
     """OpenCV's SB detector can shift a whole column by ~0.8 px next to a narrow margin
     (measured on renders); the fit must leave it out.  Synthetic, 0.01 px corner noise:
-    with the column shifted in one of six images the guarded fit stays within 1.5 µm and
-    0.001° of the fit to clean corners (measured: ≤ 1 µm); an unguarded fit moves by ~65 µm
-    (offset at the camera centre, ~250 mm from the mirror)."""
+    with the column shifted in one of six images the guarded fit stays within 3 µm and
+    0.001° of the fit to clean corners (measured over seeds 0–5: ≤ 1.5 µm, the information
+    of the left-out corners; the clean fit itself is 1–5 µm from the truth); an unguarded
+    fit moves by 50–130 µm (offset at the camera centre, ~250 mm from the mirror)."""
     from lts360.recon.mirror_calibration import MirrorObservation, refine_mirror
 
     obs, geo, K, n_c, d_c = _synthetic_mirror_shots(noise_px=0.01)
@@ -104,5 +105,5 @@ def test_refine_mirror_leaves_out_a_shifted_column_of_corners():
 
     guarded = diff(refine_mirror(obs, geo, K, np.zeros(5)))
     naive = diff(refine_mirror(obs, geo, K, np.zeros(5), corner_outlier_px=None))
-    assert guarded[0] < 1e-3 and guarded[1] < 1.5
+    assert guarded[0] < 1e-3 and guarded[1] < 3.0
     assert naive[1] > 30.0

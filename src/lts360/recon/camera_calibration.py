@@ -70,6 +70,8 @@ class CameraCalibration:
         Board poses of the kept images (board → camera).
     corners : list of (n, 2) float
         Detected corners of the kept images.
+    corner_kept : list of (n,) bool
+        Which of them the calibration used (the others were outliers).
     """
 
     K: np.ndarray
@@ -82,6 +84,7 @@ class CameraCalibration:
     rvecs: list = field(default_factory=list)
     tvecs: list = field(default_factory=list)
     corners: list = field(default_factory=list)
+    corner_kept: list = field(default_factory=list)
 
 
 def _to_u8(image) -> np.ndarray:
@@ -104,12 +107,19 @@ def detect_corners(image, board: BoardGeometry) -> np.ndarray | None:
 
 def calibrate_camera(images, board: BoardGeometry, *, max_image_rms_px: float = 0.5,
                      outlier_factor: float = 3.0, fix_k3: bool = True,
-                     zero_tangent: bool = False, min_images: int = 4) -> CameraCalibration:
+                     zero_tangent: bool = False, min_images: int = 4,
+                     corner_outlier_px: float = 0.25) -> CameraCalibration:
     """Zhang calibration of the camera from images of a chessboard.
 
     ``fix_k3`` keeps k3 = 0 and ``zero_tangent`` keeps p1 = p2 = 0 (OpenCV's
     ``CALIB_FIX_K3``, ``CALIB_ZERO_TANGENT_DIST``): fewer parameters for a lens that does not
     need them — the tangential terms trade off against the principal point.
+
+    Corners whose reprojection error exceeds both ``corner_outlier_px`` and 4 robust
+    standard deviations are left out and the calibration repeated; an image that loses a
+    quarter of its corners is dropped.  Measured on rendered images (40 poses of the 9 × 7 ×
+    8 mm board, 64 spp): OpenCV's SB detector placed a few corners of 4 of 40 images 0.9 to
+    5 px off their true projections; kept, they moved fx by 0.2 % and cy by 2 px.
 
     Raises
     ------
@@ -128,21 +138,33 @@ def calibrate_camera(images, board: BoardGeometry, *, max_image_rms_px: float = 
     found = [detect_corners(im, board) for im in images]
     used = np.array([c is not None for c in found])
     obj = board.object_points()
+    keep = [None if c is None else np.ones(len(c), bool) for c in found]
     flags = (cv2.CALIB_FIX_K3 if fix_k3 else 0) | (cv2.CALIB_ZERO_TANGENT_DIST if zero_tangent else 0)
     crit = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-12)
-    for _ in range(3):  # calibrate, drop outlier images, calibrate again
+    for _ in range(5):  # calibrate, drop outlier corners and images, calibrate again
         idx = np.flatnonzero(used)
         if len(idx) < min_images:
             raise ValueError(f"calibrate_camera: only {len(idx)} usable images, need {min_images}")
-        pts = [found[i].astype(np.float32) for i in idx]
+        objs = [obj[keep[i]] for i in idx]
+        pts = [found[i][keep[i]].astype(np.float32) for i in idx]
         rms, K, dist, rvecs, tvecs, std_i, _, per_view = cv2.calibrateCameraExtended(
-            [obj] * len(idx), pts, (w, h), None, None, flags=flags, criteria=crit)
+            objs, pts, (w, h), None, None, flags=flags, criteria=crit)
         per_view = per_view.ravel()
+        # Every detected corner against this calibration (the left-out ones too).
+        err = [np.linalg.norm(cv2.projectPoints(obj, r, t, K, dist)[0].reshape(-1, 2)
+                              - found[i], axis=1) for i, r, t in zip(idx, rvecs, tvecs)]
+        limit = max(corner_outlier_px, 4.0 * 1.4826 * float(np.median(np.concatenate(err))))
+        new_keep = {i: e <= limit for i, e in zip(idx, err)}
         bad = (per_view > max_image_rms_px) | (per_view > outlier_factor * np.median(per_view))
-        if not bad.any():
+        bad |= np.array([new_keep[i].mean() < 0.75 for i in idx])  # a quarter of it wrong
+        changed = any(not np.array_equal(new_keep[i], keep[i]) for i in idx)
+        if not bad.any() and not changed:
             break
+        for i in idx:
+            keep[i] = new_keep[i]
         used[idx[bad]] = False
     return CameraCalibration(K=K, dist=dist.ravel()[:5], image_size=(w, h), rms_px=float(rms),
                              per_image_rms_px=per_view, used=used, std_intrinsics=std_i.ravel(),
                              rvecs=[r.ravel() for r in rvecs], tvecs=[t.ravel() for t in tvecs],
-                             corners=pts)
+                             corners=[found[i] for i in idx],
+                             corner_kept=[keep[i].copy() for i in idx])

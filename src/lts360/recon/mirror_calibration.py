@@ -47,10 +47,15 @@ class MirrorEstimate:
     d_mm: float
     residuals: np.ndarray
     covariance: np.ndarray | None = None
+    corner_kept: np.ndarray | None = None
 
     @property
     def rms(self) -> float:
-        return float(np.sqrt(np.mean(np.square(self.residuals))))
+        """RMS residual (per coordinate) over the corners the fit kept."""
+        r = np.asarray(self.residuals)
+        if self.corner_kept is not None and r.size == 2 * np.size(self.corner_kept):
+            r = r.reshape(-1, 2)[np.asarray(self.corner_kept, bool)]
+        return float(np.sqrt(np.mean(np.square(r))))
 
 
 def _pose(obj, img, K, dist):
@@ -169,9 +174,13 @@ def mirror_from_midpoints(observations, board: BoardGeometry, K, dist) -> Mirror
 
 
 def per_image_rms(estimate: MirrorEstimate, n_images: int) -> np.ndarray:
-    """RMS reprojection error (px) of each image of a :func:`refine_mirror` fit."""
-    r = np.asarray(estimate.residuals).reshape(n_images, -1)
-    return np.sqrt(np.mean(r**2, axis=1))
+    """RMS reprojection error (px) of each image of a :func:`refine_mirror` fit, over the
+    corners the fit kept."""
+    r2 = np.sum(np.asarray(estimate.residuals).reshape(-1, 2) ** 2, axis=1)
+    keep = (np.ones(len(r2), bool) if estimate.corner_kept is None
+            else np.asarray(estimate.corner_kept, bool))
+    r2, keep = r2.reshape(n_images, -1), keep.reshape(n_images, -1)
+    return np.sqrt(np.sum(r2 * keep, axis=1) / np.maximum(1, keep.sum(axis=1)) / 2.0)
 
 
 def robust_refine_mirror(observations, board: BoardGeometry, K, dist, *,
@@ -272,4 +281,5 @@ def refine_mirror(observations, board: BoardGeometry, K, dist,
         pass
     if d > 0:
         n, d = -n, -d
-    return MirrorEstimate(normal=n, d_mm=float(d), residuals=res, covariance=cov)
+    return MirrorEstimate(normal=n, d_mm=float(d), residuals=res, covariance=cov,
+                          corner_kept=weight > 0)

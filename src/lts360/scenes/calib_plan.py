@@ -20,7 +20,7 @@ Poses come from a seeded generator: the same rig, board and seed give the same p
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -47,12 +47,16 @@ class BoardShot:
         The mirror a ``mirror`` shot is for.
     board : Chessboard
         The board with its world pose (``T_world_board``).
+    mirrors_covered : bool
+        The mirrors are not in place for this shot (mounted after the camera calibration, or
+        taken off): the camera sees the board only directly, and nothing hides it.
     """
 
     name: str
     kind: str
     mirror: str | None
     board: Chessboard
+    mirrors_covered: bool = False
 
 
 def _rotation(axis: np.ndarray, angle_rad: float) -> np.ndarray:
@@ -173,7 +177,8 @@ def default_camera_board() -> Chessboard:
 def plan_calibration(rig: Rig, board: Chessboard | None = None, *,
                      camera_board: Chessboard | None = None, n_camera: int = 12,
                      n_mirror: int = 4, n_laser: int = 4, seed: int = 0,
-                     volume_mm: float = 10.0, max_tries: int = 2000) -> list[BoardShot]:
+                     volume_mm: float = 10.0, max_tries: int = 2000,
+                     cover_mirrors_for_camera: bool = True) -> list[BoardShot]:
     """Board poses for a full calibration of ``rig``.
 
     Parameters
@@ -191,6 +196,13 @@ def plan_calibration(rig: Rig, board: Chessboard | None = None, *,
         Shots of the board across the laser sheet (each is rendered with the laser on and off).
     volume_mm : float
         Radius of the measurement volume the mirror and laser shots are placed in.
+    cover_mirrors_for_camera : bool
+        Take the camera shots without the mirrors (before they are mounted, or with them
+        taken off), as a lab calibrating the camera first would.  With the mirrors in place, every pose that shows
+        a second complete board in a mirror is refused, and what is left is tilted one way
+        only (measured, paper rig: 38 of 40 poses tilted +20…+46° about the image x axis);
+        Zhang's method then fixes cy to σ ≈ 1 px and fx to 0.06 % at 0.05 px corner noise
+        (20 shots), against 0.2–0.3 px and 0.03 % without the mirrors.
 
     Raises
     ------
@@ -206,7 +218,7 @@ def plan_calibration(rig: Rig, board: Chessboard | None = None, *,
     rng = np.random.default_rng(seed)
     shots: list[BoardShot] = []
 
-    def draw(n, make, kind, mirror=None, target=board):
+    def draw(n, make, kind, mirror=None, target=board, view_rig=rig):
         got, tries = 0, 0
         while got < n:
             tries += 1
@@ -215,13 +227,16 @@ def plan_calibration(rig: Rig, board: Chessboard | None = None, *,
                                  f"{'' if mirror is None else ' for the ' + mirror + ' mirror'} "
                                  f"in {max_tries} draws (board {target.size_mm} mm)")
             b = make()
-            if not _accept(shot_visibility(rig, b), mirror):
+            if not _accept(shot_visibility(view_rig, b), mirror):
                 continue
             stem = kind if mirror is None else f"{kind}-{mirror}"
-            shots.append(BoardShot(name=f"{stem}-{got:02d}", kind=kind, mirror=mirror, board=b))
+            shots.append(BoardShot(name=f"{stem}-{got:02d}", kind=kind, mirror=mirror, board=b,
+                                   mirrors_covered=not view_rig.mirrors))
             got += 1
 
-    draw(n_camera, lambda: _camera_shot(rig, camera_board, rng), "camera", target=camera_board)
+    camera_rig = replace(rig, mirrors=()) if cover_mirrors_for_camera else rig
+    draw(n_camera, lambda: _camera_shot(camera_rig, camera_board, rng), "camera",
+         target=camera_board, view_rig=camera_rig)
     for m in rig.mirrors:
         draw(n_mirror, lambda m=m: _mirror_shot(rig, board, m, rng, volume_mm), "mirror", m.name)
     draw(n_laser, lambda: _laser_shot(rig, board, rng, volume_mm), "laser")

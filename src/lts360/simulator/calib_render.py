@@ -4,13 +4,15 @@ shows — nothing more (the true rig and board poses go to a separate ``truth.js
 calibration never reads).
 
 Camera and mirror shots: the board under bright ambient light, laser off, auto-exposed on
-the whole image.  Laser shots (paper Fig. 9): the board auto-exposed for its corners, and a
+the whole image; camera shots planned with ``mirrors_covered`` are rendered without the
+mirrors (the manifest says so).  Laser shots (paper Fig. 9): the board auto-exposed for its corners, and a
 laser-on and a laser-off image at one shorter exposure set on the laser-lit pixels, so that
 their difference is the laser line.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -27,8 +29,9 @@ __all__ = ["render_calibration_images", "MANIFEST_NAME"]
 MANIFEST_NAME = "manifest.json"
 
 
-def _render(rig, board, *, laser_on, spp, seed, thin_lens):
-    spec = SceneSpec(rig, (), ambient="bright", targets=(board,))
+def _render(rig, board, *, laser_on, spp, seed, thin_lens, mirrors=True):
+    spec = SceneSpec(rig if mirrors else replace(rig, mirrors=()), (), ambient="bright",
+                     targets=(board,))
     return render_radiance(spec, spp=spp, seed=seed, thin_lens=thin_lens, laser_on=laser_on)
 
 
@@ -92,8 +95,11 @@ def render_calibration_images(rig: Rig, shots: list[BoardShot], out_dir, *, nois
                 entry[f"image_{suffix}"] = f"{shot.name}-{suffix}.png"
             K = on.K
         else:
-            res = _render(rig, shot.board, laser_on=False, spp=spp, seed=s, thin_lens=thin_lens)
+            res = _render(rig, shot.board, laser_on=False, spp=spp, seed=s, thin_lens=thin_lens,
+                          mirrors=not shot.mirrors_covered)
             img, _, _ = sensor_image(rig, res, noise=noise, seed=s)
+            if shot.mirrors_covered:
+                entry["mirrors_covered"] = True
             write_png(out / f"{shot.name}.png", img)
             entry["image"] = f"{shot.name}.png"
             K = res.K
