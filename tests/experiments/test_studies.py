@@ -144,3 +144,23 @@ def test_examples_and_algorithms_studies_end_to_end(tmp_path):
     assert set(rows) == set(METHODS)
     for method, r in rows.items():
         assert abs(r["bias_um"]) < 15 and r["rms_um"] < 30, (method, r)
+
+
+def test_a_calibration_rewritten_under_the_same_name_is_read_again(tmp_path, truth_calibration):
+    """The per-process plan cache is keyed on the file's version, not only its name."""
+    import os
+    import shutil
+
+    from lts360.experiments.gauge_study import _plan
+    from lts360.recon.calibration import load_calibration, save_calibration
+
+    path = tmp_path / "calibration.json"
+    shutil.copy(truth_calibration, path)
+    first = _plan(path, 10.0, 0.2, 1.0, 0.05)[0]
+    assert first.view_offsets_mm in (None, {}) or not any(np.any(v) for v in first.view_offsets_mm.values())
+    cal = dataclasses.replace(load_calibration(path), view_offsets_mm={"left": np.array([0.01, 0.0])})
+    save_calibration(path, cal)
+    os.utime(path, ns=(os.stat(path).st_atime_ns, os.stat(path).st_mtime_ns + 10**9))
+    second = _plan(path, 10.0, 0.2, 1.0, 0.05)[0]
+    np.testing.assert_allclose(second.view_offsets_mm["left"], [0.01, 0.0])
+    assert _plan(path, 10.0, 0.2, 1.0, 0.05)[0] is second  # unchanged file: cached

@@ -20,6 +20,7 @@ from __future__ import annotations
 import functools
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -63,9 +64,17 @@ def gauge_placements(n: int, seed: int, *, offset_mm: float = 0.3, tilt_deg: flo
     return out
 
 
+def _plan(cal_path, r_mm: float, band_mm: float, theta_step_deg: float, r_step_mm: float):
+    """Calibration, grid and the Dr.Jit kernel (or the numpy plan) — once per process and
+    calibration file version (a file rewritten under the same name is read again)."""
+    st = os.stat(cal_path)
+    return _cached_plan(str(cal_path), (st.st_mtime_ns, st.st_size), float(r_mm), band_mm,
+                        theta_step_deg, r_step_mm)
+
+
 @functools.lru_cache(maxsize=4)
-def _plan(cal_path: str, r_mm: float, band_mm: float, theta_step_deg: float, r_step_mm: float):
-    """Calibration, grid and the Dr.Jit kernel (or the numpy plan) — once per process."""
+def _cached_plan(cal_path: str, version: tuple, r_mm: float, band_mm: float,
+                 theta_step_deg: float, r_step_mm: float):
     from lts360.recon.calibration import load_calibration
     from lts360.recon.grid import CylGrid
     from lts360.recon.inverse import plan_inverse
