@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["BoardGeometry", "CameraCalibration", "detect_corners", "calibrate_camera"]
+__all__ = ["BoardGeometry", "CameraCalibration", "detect_corners", "calibrate_camera",
+           "corner_outlier_limit"]
 
 
 @dataclass(frozen=True)
@@ -87,6 +88,15 @@ class CameraCalibration:
     corner_kept: list = field(default_factory=list)
 
 
+def corner_outlier_limit(errors_px: np.ndarray, floor_px: float) -> float:
+    """Reprojection error (px) above which a corner is an outlier: ``floor_px`` or 4 robust
+    standard deviations of ``errors_px`` (the distances of many corners from their fit,
+    σ ≈ 1.4826 × median), whichever is larger.  Used where many boards share one fit (Zhang,
+    the mirror planes); a single board's fit needs the worst-first rule of
+    :func:`lts360.recon.laser_calibration.board_pose`."""
+    return max(float(floor_px), 4.0 * 1.4826 * float(np.median(errors_px)))
+
+
 def _to_u8(image) -> np.ndarray:
     img = np.asarray(image)
     if img.dtype == np.uint8:
@@ -153,7 +163,7 @@ def calibrate_camera(images, board: BoardGeometry, *, max_image_rms_px: float = 
         # Every detected corner against this calibration (the left-out ones too).
         err = [np.linalg.norm(cv2.projectPoints(obj, r, t, K, dist)[0].reshape(-1, 2)
                               - found[i], axis=1) for i, r, t in zip(idx, rvecs, tvecs)]
-        limit = max(corner_outlier_px, 4.0 * 1.4826 * float(np.median(np.concatenate(err))))
+        limit = corner_outlier_limit(np.concatenate(err), corner_outlier_px)
         new_keep = {i: e <= limit for i, e in zip(idx, err)}
         bad = (per_view > max_image_rms_px) | (per_view > outlier_factor * np.median(per_view))
         bad |= np.array([new_keep[i].mean() < 0.75 for i in idx])  # a quarter of it wrong

@@ -25,7 +25,7 @@ from scipy.optimize import least_squares
 
 from lts360.geometry.camera import project_camera_points
 from lts360.geometry.fit import fit_plane
-from lts360.recon.camera_calibration import BoardGeometry, _to_u8
+from lts360.recon.camera_calibration import BoardGeometry, _to_u8, corner_outlier_limit
 
 __all__ = ["MirrorObservation", "MirrorEstimate", "detect_real_and_virtual", "mirror_from_midpoints",
            "refine_mirror", "robust_refine_mirror", "per_image_rms"]
@@ -264,7 +264,7 @@ def refine_mirror(observations, board: BoardGeometry, K, dist,
         err = np.linalg.norm(residuals(sol.x).reshape(-1, 2), axis=1)
         if corner_outlier_px is None:
             break
-        limit = max(corner_outlier_px, 4.0 * 1.4826 * float(np.median(err)))
+        limit = corner_outlier_limit(err, corner_outlier_px)
         new = (err <= limit).astype(float)
         if np.array_equal(new, weight):
             break
