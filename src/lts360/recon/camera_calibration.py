@@ -106,13 +106,78 @@ def _to_u8(image) -> np.ndarray:
     return np.clip(img / (hi if hi > 0 else 1.0) * 255.0, 0, 255).astype(np.uint8)
 
 
-def detect_corners(image, board: BoardGeometry) -> np.ndarray | None:
-    """(n, 2) sub-pixel inner corners in OpenCV order, or ``None`` where the board is not found."""
+def _sb_corners(im8: np.ndarray, board: BoardGeometry) -> np.ndarray | None:
     import cv2
 
-    ok, corners = cv2.findChessboardCornersSB(_to_u8(image), tuple(board.pattern_size),
+    ok, corners = cv2.findChessboardCornersSB(im8, tuple(board.pattern_size),
                                               flags=cv2.CALIB_CB_ACCURACY)
     return corners.reshape(-1, 2).astype(np.float64) if ok else None
+
+
+def _refine_saddle(im8: np.ndarray, corners: np.ndarray, board: BoardGeometry, *,
+                   window_fraction: float = 0.4, max_move_px: float = 1.0) -> np.ndarray:
+    """``cornerSubPix`` on every corner, with a window of ``window_fraction`` of the shortest
+    corner spacing (2–10 px half-size); a corner it moves by more than ``max_move_px`` keeps
+    its SB position (the window slipped off the junction)."""
+    import cv2
+
+    nx, ny = board.pattern_size
+    g = corners.reshape(ny, nx, 2)
+    spacing = min(np.linalg.norm(np.diff(g, axis=1), axis=2).min(),
+                  np.linalg.norm(np.diff(g, axis=0), axis=2).min())
+    w = int(np.clip(np.floor(window_fraction * spacing), 2, 10))
+    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
+    sub = cv2.cornerSubPix(im8, corners.astype(np.float32).reshape(-1, 1, 2).copy(), (w, w),
+                           (-1, -1), crit).reshape(-1, 2).astype(np.float64)
+    moved = np.linalg.norm(sub - corners, axis=1) > max_move_px
+    return np.where(moved[:, None], corners, sub)
+
+
+def detect_corners(image, board: BoardGeometry, *, symmetrize: bool = True,
+                   refine: bool = False) -> np.ndarray | None:
+    """(n, 2) sub-pixel inner corners in OpenCV order, or ``None`` where the board is not found.
+
+    OpenCV's SB detector (``findChessboardCornersSB`` with ``CALIB_CB_ACCURACY``) finds and
+    orders the corners.  Two corrections of its biases, measured on rendered boards:
+
+    ``symmetrize`` (default)
+        Also detect in the image flipped left–right, flipped up–down and turned by 180°, map
+        those corners back and average all four.  SB is not mirror-symmetric: the corners
+        found in a flipped image and mapped back differ by up to 0.08 px on average over a
+        board.  Averaging over the flips cancels the part of the bias that changes sign with
+        them.  Measured on 30 camera poses: fx +0.005 → +0.001 %, cx +0.14 → +0.01 px.
+    ``refine``
+        Move every corner to the saddle point of a small window (:func:`_refine_saddle`,
+        OpenCV's ``cornerSubPix``).  The saddle point does not depend on the start, so
+        ``symmetrize`` is moot then.  It is noisier than SB at 64 spp (0.08–0.15 against
+        0.05 px RMS) but free of SB's pull near the board's edge: on boards seen in a mirror,
+        SB shifts the outer ring of corners outwards by 0.04–0.07 px on average (the real
+        boards: 0.00), which moved the mirror planes by tens of µm.  The mirror shots use it.
+    """
+    from scipy.spatial import cKDTree
+
+    im8 = _to_u8(image)
+    corners = _sb_corners(im8, board)
+    if corners is None:
+        return None
+    if refine:
+        return _refine_saddle(im8, corners, board)
+    if not symmetrize:
+        return corners
+    h, w = im8.shape[:2]
+    found = [corners]
+    for flip, back in ((im8[:, ::-1], lambda c: np.column_stack([w - 1 - c[:, 0], c[:, 1]])),
+                       (im8[::-1, :], lambda c: np.column_stack([c[:, 0], h - 1 - c[:, 1]])),
+                       (im8[::-1, ::-1], lambda c: np.column_stack([w - 1 - c[:, 0],
+                                                                    h - 1 - c[:, 1]]))):
+        c = _sb_corners(np.ascontiguousarray(flip), board)
+        if c is None:
+            continue
+        c = back(c)
+        dist, idx = cKDTree(c).query(corners)
+        if len(set(idx.tolist())) == len(corners) and dist.max() < 1.5:  # the same corners
+            found.append(c[idx])
+    return np.mean(found, axis=0)
 
 
 def calibrate_camera(images, board: BoardGeometry, *, max_image_rms_px: float = 0.5,

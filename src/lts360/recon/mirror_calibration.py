@@ -87,10 +87,12 @@ def detect_real_and_virtual(image, board: BoardGeometry, K, dist, *,
     """
     import cv2
 
-    from lts360.recon.camera_calibration import detect_corners
+    from lts360.recon.camera_calibration import _refine_saddle, detect_corners
 
     im8 = _to_u8(image)
-    first = detect_corners(im8, board)
+    # Saddle-point corners for both boards (``detect_corners(refine=True)``): SB pulls the
+    # outer ring of a board seen in a mirror outwards by 0.04–0.07 px.
+    first = detect_corners(im8, board, refine=True)
     if first is None:
         return None
     mask = np.zeros_like(im8)
@@ -99,9 +101,10 @@ def detect_real_and_virtual(image, board: BoardGeometry, K, dist, *,
     mask = cv2.dilate(mask, np.ones((mask_dilate_px, mask_dilate_px), np.uint8))
     im2 = im8.copy()
     im2[mask > 0] = int(np.median(im8))
-    second = detect_corners(im2, board)
+    second = detect_corners(im2, board, symmetrize=False)
     if second is None:
         return None
+    second = _refine_saddle(im8, second, board)  # on the image itself, not the masked one
     obj = board.object_points().astype(np.float64)
     obj_m = obj * np.array([-1.0, 1.0, 1.0])
     nx, ny = board.pattern_size
