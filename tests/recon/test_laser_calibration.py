@@ -112,3 +112,88 @@ def test_board_pose_leaves_out_a_shifted_column():
     Rn, _ = board_pose(bad, geo, K, np.zeros(5), corner_outlier_px=None)
     assert tilt_deg(Rg) < 1e-4 and np.allclose(tg, t, atol=1e-4)
     assert tilt_deg(Rn) > 0.3
+
+
+def _board_seen_in_mirror(rig, name, geo):
+    """A 7×6 × 2 mm board on the rig's axis, posed like a mirror shot: facing the bisector of
+    the camera and its image in mirror ``name`` (camera frame).  Returns the true pose
+    ``(R, t)`` and the mirror plane ``(n, d)`` in the camera frame."""
+    from lts360.geometry.mirror import reflect_points, transform_plane
+
+    cam = rig.camera
+    m = next(mm for mm in rig.mirrors if mm.name == name)
+    n_m, d_m = transform_plane(m.normal, float(m.normal @ m.center_mm), cam.R, cam.t_mm)
+    centre = cam.R @ np.array([1.0, -2.0, 0.0]) + cam.t_mm
+    cv = reflect_points(np.zeros((1, 3)), n_m, d_m)[0]
+    z = -centre / np.linalg.norm(centre) + (cv - centre) / np.linalg.norm(cv - centre)
+    z /= np.linalg.norm(z)
+    x = np.cross([0.3, 1.0, 0.0], z)
+    x /= np.linalg.norm(x)
+    R = np.column_stack([x, np.cross(z, x), z])
+    nx, ny = geo.pattern_size
+    t = centre - R @ np.array([(nx - 1) / 2, (ny - 1) / 2, 0.0]) * geo.square_mm
+    return R, t, n_m, d_m
+
+
+def test_board_pose_in_mirror_fixes_the_depth_that_one_view_cannot():
+    """Board seen directly and in a mirror (paper rig, paper board, true mirror): exact corners
+    give the true pose; with 0.1 px of corner noise the depth at the board's centre is an
+    order of magnitude better from both views than from the direct view (measured at seed 0,
+    20 draws: RMS 2.5 µm against 59 µm (left) and 73 µm (right))."""
+    pytest.importorskip("cv2")
+    from lts360.geometry.camera import project_camera_points
+    from lts360.geometry.mirror import reflect_points
+    from lts360.recon.camera_calibration import BoardGeometry
+    from lts360.recon.laser_calibration import board_pose, board_pose_in_mirror
+    from lts360.scenes.rig_io import load_rig
+
+    rig = load_rig("paper")
+    geo = BoardGeometry((6, 5), 2.0)
+    K, dist = rig.camera.K, np.zeros(5)
+    for name in ("left", "right"):
+        R, t, n_m, d_m = _board_seen_in_mirror(rig, name, geo)
+        X = geo.object_points() @ R.T + t
+        real = project_camera_points(X, K)
+        virt = project_camera_points(reflect_points(X, n_m, d_m), K)
+        Re, te = board_pose_in_mirror(real, virt, geo, K, dist, n_m, d_m)
+        assert np.degrees(np.arccos(min(1.0, Re[:, 2] @ R[:, 2]))) < 1e-6
+        np.testing.assert_allclose(te, t, atol=1e-6)
+
+        rng = np.random.default_rng(0)
+        c = X.mean(axis=0)
+        one, both = [], []
+        for _ in range(20):
+            r_n = real + rng.normal(0, 0.1, real.shape)
+            v_n = virt + rng.normal(0, 0.1, virt.shape)
+            for out, (Rx, tx) in ((one, board_pose(r_n, geo, K, dist)),
+                                  (both, board_pose_in_mirror(r_n, v_n, geo, K, dist, n_m, d_m))):
+                out.append(Rx[:, 2] @ (c - tx))  # true centre's distance from the estimated plane
+        rms_one, rms_both = np.sqrt(np.mean(np.square(one))), np.sqrt(np.mean(np.square(both)))
+        assert rms_both < 0.006 and rms_both < rms_one / 8, (name, rms_one, rms_both)
+
+
+def test_board_pose_in_mirror_leaves_out_a_shifted_column():
+    """A column of virtual corners 0.8 px off must not move the pose (left out as an
+    outlier); kept, it moves the board's centre by 11 µm (measured)."""
+    pytest.importorskip("cv2")
+    from lts360.geometry.camera import project_camera_points
+    from lts360.geometry.mirror import reflect_points
+    from lts360.recon.camera_calibration import BoardGeometry
+    from lts360.recon.laser_calibration import board_pose_in_mirror
+    from lts360.scenes.rig_io import load_rig
+
+    rig = load_rig("paper")
+    geo = BoardGeometry((6, 5), 2.0)
+    R, t, n_m, d_m = _board_seen_in_mirror(rig, "left", geo)
+    X = geo.object_points() @ R.T + t
+    real = project_camera_points(X, rig.camera.K)
+    virt = project_camera_points(reflect_points(X, n_m, d_m), rig.camera.K).reshape(5, 6, 2)
+    virt[:, 0, 0] += 0.8
+    virt = virt.reshape(-1, 2)
+    c = X.mean(axis=0)
+    Rg, tg = board_pose_in_mirror(real, virt, geo, rig.camera.K, np.zeros(5), n_m, d_m)
+    Rn, tn = board_pose_in_mirror(real, virt, geo, rig.camera.K, np.zeros(5), n_m, d_m,
+                                  corner_outlier_px=None)
+    assert abs(Rg[:, 2] @ (c - tg)) < 1e-5
+    assert abs(Rn[:, 2] @ (c - tn)) > 5e-3
+

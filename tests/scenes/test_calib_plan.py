@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from lts360.scenes.calib_plan import plan_calibration, shot_visibility
+from lts360.scenes.calib_plan import laser_crossing_ok, plan_calibration, shot_visibility
 from lts360.scenes.rig_io import load_rig
 from lts360.scenes.targets import Chessboard
 
@@ -35,21 +35,55 @@ def test_every_shot_is_seen_as_planned(rig, shots):
         vis = shot_visibility(dataclasses.replace(rig, mirrors=()) if s.mirrors_covered else rig,
                               s.board)
         assert vis["direct"] == 1.0, s.name
-        if s.kind == "mirror":
-            assert vis[s.mirror] == 1.0, s.name
+        if s.kind in ("mirror", "laser"):
+            assert s.mirror in ("left", "right") and vis[s.mirror] == 1.0, (s.name, vis)
         others = [v for k, v in vis.items() if k not in ("direct", s.mirror)]
         assert max(others, default=0.0) < 0.5, (s.name, vis)
+    assert [s.mirror for s in shots if s.kind == "laser"] == ["left", "right", "left"]
 
 
-def test_laser_shots_straddle_the_sheet_and_face_laser_and_camera(rig, shots):
+def _check_laser_shot(rig, s, *, min_cos, min_angle_deg):
     L = np.asarray(rig.laser.origin_mm)
-    C = rig.camera.center_mm
+    X = s.board.corners_world_mm()
+    assert X[:, 2].min() < 0 < X[:, 2].max(), s.name  # the sheet z = 0 crosses the squares
+    T = s.board.T_world_board
+    n = T[:3, 2]
+    centre = X.mean(axis=0)
+    to_board = (centre - L) * [1, 1, 0]
+    assert -n @ to_board / np.linalg.norm(to_board) >= min_cos, s.name  # lit from the front
+    line = np.cross(n, [0.0, 0.0, 1.0])
+    line /= np.linalg.norm(line)
+    off_axes = np.degrees(np.arccos(np.abs([line @ T[:3, 0], line @ T[:3, 1]])))
+    assert off_axes.min() >= min_angle_deg, s.name
+
+
+def test_laser_shots_straddle_the_sheet_lit_from_the_front_and_oblique(rig, shots):
     for s in (s for s in shots if s.kind == "laser"):
-        z = s.board.corners_world_mm()[:, 2]
-        assert z.min() < 0 < z.max(), s.name  # the sheet z = 0 crosses the squares
+        _check_laser_shot(rig, s, min_cos=0.2, min_angle_deg=15.0)
+
+
+def test_laser_shots_seen_directly_only_face_laser_and_camera(rig):
+    plan = plan_calibration(rig, n_camera=4, n_mirror=1, n_laser=3, seed=4,
+                            laser_in_mirror=False)
+    C = rig.camera.center_mm
+    for s in (s for s in plan if s.kind == "laser"):
+        assert s.mirror is None
+        vis = shot_visibility(rig, s.board)
+        assert vis["direct"] == 1.0 and max(v for k, v in vis.items() if k != "direct") < 0.5
+        _check_laser_shot(rig, s, min_cos=0.0, min_angle_deg=0.0)
         n = s.board.T_world_board[:3, 2]
-        centre = s.board.corners_world_mm().mean(axis=0)
-        assert n @ (L - centre) > 0 and n @ (C - centre) > 0
+        assert n @ (C - s.board.corners_world_mm().mean(axis=0)) > 0
+
+
+def test_laser_crossing_rejects_a_board_the_sheet_misses_or_lights_from_behind(rig, shots):
+    s = next(s for s in shots if s.kind == "laser")
+    assert laser_crossing_ok(rig, s.board)
+    lifted = s.board.T_world_board.copy()
+    lifted[2, 3] += 20.0  # the sheet passes below the squares
+    assert not laser_crossing_ok(rig, dataclasses.replace(s.board, T_world_board=lifted))
+    flipped = s.board.T_world_board.copy()
+    flipped[:3, 1:3] *= -1  # turned over about its x axis: printed side away from the laser
+    assert not laser_crossing_ok(rig, dataclasses.replace(s.board, T_world_board=flipped))
 
 
 def test_same_seed_same_plan_other_seed_other_plan(rig, shots):

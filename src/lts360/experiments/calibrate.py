@@ -89,6 +89,8 @@ def calibration_report(result: RigCalibrationResult) -> dict:
     las = result.laser
     rep["laser_plane"] = {"poses": list(result.laser_lines),
                           "points_per_pose": [len(v.uv) for v in result.laser_lines.values()],
+                          "pose_views": [list(v.pose_views)
+                                         for v in result.laser_lines.values()],
                           "rms_mm": las.rms_mm,
                           "std_angle_deg": unc["laser_plane"]["std_angle_deg"],
                           "std_offset_mm": unc["laser_plane"]["std_offset_mm"]}
@@ -117,7 +119,8 @@ def plot_fig8(result: RigCalibrationResult, images_dir: Path, path: Path) -> Non
     for name, (names, obs) in result.mirror_observations.items():
         if first:
             shot = next(s for s in imgs.shots if s["name"] == names[0])
-            img = cv2.imread(str(imgs.root / shot["image"]), cv2.IMREAD_UNCHANGED)
+            img = cv2.imread(str(imgs.root / (shot.get("image") or shot["image_board"])),
+                             cv2.IMREAD_UNCHANGED)
             ax0.imshow(img, cmap="gray")
             ax0.plot(*obs[0].real_px.T, "r+", ms=5, label="real board")
             ax0.plot(*obs[0].virtual_px.T, "c+", ms=5, label="virtual board")
@@ -237,7 +240,9 @@ def format_report(report: dict) -> str:
                      f" midpoint plane {m['midpoint_vs_lsq_deg']:.4f}° / "
                      f"{m['midpoint_vs_lsq_offset_um']:+.1f} µm from LSQ")
     la = report["laser_plane"]
-    lines.append(f"laser plane: {len(la['poses'])} poses, {sum(la['points_per_pose'])} points, "
+    in_mirror = sum(len(v) > 1 for v in la.get("pose_views", []))
+    lines.append(f"laser plane: {len(la['poses'])} poses ({in_mirror} posed from the direct and "
+                 f"a mirror view), {sum(la['points_per_pose'])} points, "
                  f"RMS {1e3 * la['rms_mm']:.1f} µm, σ(normal) {la['std_angle_deg']:.4f}°, "
                  f"σ(offset) {1e3 * la['std_offset_mm']:.1f} µm")
     if report.get("skipped"):

@@ -9,7 +9,8 @@ Input: a folder with the images and ``manifest.json``::
      "shots": [{"name": "camera-00", "kind": "camera", "image": "camera-00.png"},
                {"name": "mirror-left-00", "kind": "mirror", "mirror": "left",
                 "image": "mirror-left-00.png"},
-               {"name": "laser-00", "kind": "laser", "image_board": "laser-00-board.png",
+               {"name": "laser-00", "kind": "laser", "mirror": "left",
+                "image_board": "laser-00-board.png",
                 "image_on": "laser-00-on.png", "image_off": "laser-00-off.png"}]}
 
 ``board`` is the small target of the mirror and laser shots; ``camera_board`` (optional,
@@ -17,7 +18,9 @@ default ``board``) the one of the ``camera`` shots.
 
 Steps: (1) Zhang's camera calibration on the ``camera`` shots; (2) per mirror, the real and the
 virtual board in each ``mirror`` shot → the paper's midpoint plane and a joint least-squares
-plane (the one kept); (3) the laser plane from the line on the board; (4) the measurement
+plane (the one kept); (3) the laser plane from the line on the board — a laser shot that
+names a ``mirror`` shows its board in that mirror too (``image_board``), and its pose is
+then taken from both views with the calibrated mirror; (4) the measurement
 frame: z along the laser normal, origin where the nominal object axis meets the sheet — the
 axis is parallel to the mirrors' common edge, ``mirror_corner_distance_mm`` from it on the
 bisector of the mirrors (the rig's design; a lab measures it once) — and θ = 0 along the
@@ -38,8 +41,8 @@ import numpy as np
 
 from lts360.recon.calibration import Calibration, MirrorPlane, make_T_cam_meas
 from lts360.recon.camera_calibration import BoardGeometry, CameraCalibration, calibrate_camera
-from lts360.recon.laser_calibration import (LaserLine, LaserPlaneEstimate, fit_laser_plane,
-                                            laser_line_points)
+from lts360.recon.laser_calibration import (LaserLine, LaserPlaneEstimate, board_pose_in_mirror,
+                                            fit_laser_plane, laser_line_points)
 from lts360.recon.measure import read_image as _read
 from lts360.recon.mirror_calibration import (MirrorEstimate, MirrorObservation,
                                              detect_real_and_virtual, mirror_from_midpoints,
@@ -191,13 +194,17 @@ def _plane_unc(n, d, lsq_cov, groups_abd) -> dict:
 
 
 def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
-                  progress=None) -> RigCalibrationResult:
+                  progress=None, use_laser_boards_for_mirrors: bool = True) -> RigCalibrationResult:
     """Calibrate camera, mirrors and laser plane from the manifest's images.
 
     ``tangential``: estimate the tangential distortion p1, p2 too.  Off by default — k1, k2
     only, as is usual for a fixed-focal machine-vision lens: p1, p2 trade off against the
     principal point (measured on rendered images of a lens without distortion, 24 poses:
     cx/cy errors 0.41/0.58 px with them, 0.03/0.37 px without).
+
+    ``use_laser_boards_for_mirrors``: a laser shot whose board is seen in a mirror too adds
+    that real/virtual pair to the mirror's fit (its pose is taken from both views in any
+    case).
 
     Raises
     ------
@@ -220,12 +227,21 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
                                for n, u in zip(names, cam.used) if not u}
     obs: dict[str, list[MirrorObservation]] = {}
     obs_names: dict[str, list[str]] = {}
+    laser_obs: dict[str, MirrorObservation] = {}
     for s in images.shots:
-        if s["kind"] != "mirror":
+        # Mirror shots, and laser shots whose board is seen in a mirror too: both show a
+        # real and a virtual board.
+        if s["kind"] == "laser" and s.get("mirror"):
+            ob = detect_real_and_virtual(_read(images.root / s["image_board"]), board, K, dist)
+            if ob is not None:
+                laser_obs[s["name"]] = ob
+        elif s["kind"] == "mirror":
+            ob = detect_real_and_virtual(_read(images.root / s["image"]), board, K, dist)
+            if ob is None:
+                skipped[s["name"]] = "real and virtual board not both found"
+        else:
             continue
-        ob = detect_real_and_virtual(_read(images.root / s["image"]), board, K, dist)
-        if ob is None:
-            skipped[s["name"]] = "real and virtual board not both found"
+        if ob is None or (s["kind"] == "laser" and not use_laser_boards_for_mirrors):
             continue
         obs.setdefault(s["mirror"], []).append(ob)
         obs_names.setdefault(s["mirror"], []).append(s["name"])
@@ -255,11 +271,23 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
     for s in images.shots:
         if s["kind"] != "laser":
             continue
+        image_board = _read(images.root / s["image_board"])
+        pose, views = None, ("direct",)
+        name = s.get("mirror")
+        if name in planes:
+            # Seen in a calibrated mirror too: the pose from both views (stereo with the
+            # mirror's virtual camera), else from the direct view alone.
+            ob = laser_obs.get(s["name"])
+            if ob is not None:
+                lsq = planes[name][0]
+                pose = board_pose_in_mirror(ob.real_px, ob.virtual_px, board, K, dist,
+                                            lsq.normal, lsq.d_mm)
+                views = ("direct", name)
         try:
             lines[s["name"]] = laser_line_points(_read(images.root / s["image_on"]),
                                                  _read(images.root / s["image_off"]),
-                                                 _read(images.root / s["image_board"]),
-                                                 board, K, dist)
+                                                 image_board, board, K, dist, pose=pose,
+                                                 pose_views=views)
         except ValueError as exc:
             skipped[s["name"]] = str(exc)
     say(f"laser plane: {len(lines)} poses")

@@ -11,9 +11,15 @@ mirror images in one picture would make the real/virtual pairing ambiguous):
 * ``mirror`` — the board in the measurement volume, facing the bisector of the camera and
   its mirror image, so that the camera sees it directly and in one mirror (the virtual,
   mirror-reversed board); tilted ±10° so that the poses differ;
-* ``laser`` — the board across the laser sheet, facing the bisector of the laser apex and
-  the camera, turned about its normal so that the line crosses the squares obliquely; the
-  lines of different poses are not parallel, so their points span the plane.
+* ``laser`` — the board across the laser sheet, lit by it from the printed side, the line
+  crossing the squares obliquely; the lines of different poses are not parallel, so their
+  points span the plane.  By default (``laser_in_mirror``) a laser board is posed like a
+  mirror shot, so that the camera sees it directly *and* in one mirror (the shots alternate
+  between the mirrors): its pose is then fixed by both views, a stereo pair with the
+  mirror's virtual camera, instead of by the scale of a small board in one view (measured on
+  rendered 7×6 × 2 mm boards: depth at the board's centre ±4 µm against ±150 µm).  Without
+  it, a laser board faces the bisector of the laser apex and the camera and is seen directly
+  only.
 
 Poses come from a seeded generator: the same rig, board and seed give the same plan.
 """
@@ -29,7 +35,8 @@ from lts360.scenes.coverage import path_valid
 from lts360.scenes.rig import Rig
 from lts360.scenes.targets import Chessboard
 
-__all__ = ["BoardShot", "plan_calibration", "shot_visibility", "default_camera_board"]
+__all__ = ["BoardShot", "plan_calibration", "shot_visibility", "default_camera_board",
+           "laser_crossing_ok"]
 
 SHOT_KINDS = ("camera", "mirror", "laser")
 
@@ -44,7 +51,8 @@ class BoardShot:
         File stem, e.g. ``camera-03``, ``mirror-left-01``, ``laser-02``.
     kind : {"camera", "mirror", "laser"}
     mirror : str or None
-        The mirror a ``mirror`` shot is for.
+        The mirror a ``mirror`` shot is for; for a ``laser`` shot, the mirror in which the
+        board is seen as well (``None``: seen directly only).
     board : Chessboard
         The board with its world pose (``T_world_board``).
     mirrors_covered : bool
@@ -139,12 +147,13 @@ def _camera_shot(rig, board, rng, tilt_deg=(30.0, 50.0), depth_range=(0.85, 1.1)
     return _board_at(board, centre, normal, rng.uniform(-np.pi, np.pi))
 
 
-def _mirror_shot(rig, board, mirror, rng, volume_mm):
+def _mirror_shot(rig, board, mirror, rng, volume_mm, z_mm=None):
     C = rig.camera.center_mm
     Cv = (mirror.T @ np.append(C, 1.0))[:3]
     r = volume_mm * np.sqrt(rng.uniform(0, 1))
     phi = rng.uniform(-np.pi, np.pi)
-    centre = np.array([r * np.cos(phi), r * np.sin(phi), rng.uniform(-0.4, 0.4) * volume_mm])
+    z = rng.uniform(-0.4, 0.4) * volume_mm if z_mm is None else rng.uniform(-z_mm, z_mm)
+    centre = np.array([r * np.cos(phi), r * np.sin(phi), z])
     n = (C - centre) / np.linalg.norm(C - centre) + (Cv - centre) / np.linalg.norm(Cv - centre)
     n /= np.linalg.norm(n)
     n = _rotation(np.cross(n, rng.normal(size=3)), np.radians(rng.uniform(0.0, 10.0))) @ n
@@ -163,6 +172,34 @@ def _laser_shot(rig, board, rng, volume_mm):
     return _board_at(board, centre, n, np.radians(rng.choice([-1, 1]) * rng.uniform(20.0, 70.0)))
 
 
+def laser_crossing_ok(rig: Rig, board: Chessboard, *, min_cos: float = 0.2,
+                      min_angle_deg: float = 15.0, inner: float = 0.6) -> bool:
+    """The laser sheet crosses ``board`` usefully: it lights the printed side (cosine of
+    incidence at least ``min_cos``), meets the inner corners within the middle ``inner``
+    share of their extent across the line, and runs at least ``min_angle_deg`` off the
+    board's rows and columns (a line along a row of corners lies on black/white edges)."""
+    T = board.T_world_board
+    L = np.asarray(rig.laser.origin_mm, dtype=float)
+    p, n_sheet = L, np.asarray(rig.laser.normal, dtype=float)
+    n_b = T[:3, 2]
+    X = board.corners_world_mm()
+    centre = X.mean(axis=0)
+    to_board = centre - L
+    to_board -= (to_board @ n_sheet) * n_sheet
+    to_board /= np.linalg.norm(to_board)
+    if -(n_b @ to_board) < min_cos:
+        return False
+    h = (X - p) @ n_sheet  # signed distance of the corners from the sheet
+    lo, hi = h.min(), h.max()
+    mid, half = (lo + hi) / 2.0, inner * (hi - lo) / 2.0
+    if not (mid - half <= 0.0 <= mid + half):
+        return False
+    line = np.cross(n_b, n_sheet)
+    line /= np.linalg.norm(line)
+    ang = np.degrees(np.arccos(np.clip(np.abs([line @ T[:3, 0], line @ T[:3, 1]]), 0, 1)))
+    return bool(ang.min() >= min_angle_deg)
+
+
 def default_camera_board() -> Chessboard:
     """The camera-calibration board: 9×7 squares of 8 mm (72 × 56 mm).
 
@@ -178,7 +215,8 @@ def plan_calibration(rig: Rig, board: Chessboard | None = None, *,
                      camera_board: Chessboard | None = None, n_camera: int = 12,
                      n_mirror: int = 4, n_laser: int = 4, seed: int = 0,
                      volume_mm: float = 10.0, max_tries: int = 2000,
-                     cover_mirrors_for_camera: bool = True) -> list[BoardShot]:
+                     cover_mirrors_for_camera: bool = True,
+                     laser_in_mirror: bool = True) -> list[BoardShot]:
     """Board poses for a full calibration of ``rig``.
 
     Parameters
@@ -203,6 +241,10 @@ def plan_calibration(rig: Rig, board: Chessboard | None = None, *,
         only (measured, paper rig: 38 of 40 poses tilted +20…+46° about the image x axis);
         Zhang's method then fixes cy to σ ≈ 1 px and fx to 0.06 % at 0.05 px corner noise
         (20 shots), against 0.2–0.3 px and 0.03 % without the mirrors.
+    laser_in_mirror : bool
+        Pose each laser board so that it is seen directly and in one mirror (alternating
+        left, right, …), lit by the sheet from its printed side; its pose then comes from both
+        views.  ``False``: laser boards seen directly only.
 
     Raises
     ------
@@ -218,7 +260,8 @@ def plan_calibration(rig: Rig, board: Chessboard | None = None, *,
     rng = np.random.default_rng(seed)
     shots: list[BoardShot] = []
 
-    def draw(n, make, kind, mirror=None, target=board, view_rig=rig):
+    def draw(n, make, kind, mirror=None, target=board, view_rig=rig, check=None, first=0,
+             stem=None):
         got, tries = 0, 0
         while got < n:
             tries += 1
@@ -229,9 +272,11 @@ def plan_calibration(rig: Rig, board: Chessboard | None = None, *,
             b = make()
             if not _accept(shot_visibility(view_rig, b), mirror):
                 continue
-            stem = kind if mirror is None else f"{kind}-{mirror}"
-            shots.append(BoardShot(name=f"{stem}-{got:02d}", kind=kind, mirror=mirror, board=b,
-                                   mirrors_covered=not view_rig.mirrors))
+            if check is not None and not check(b):
+                continue
+            name = stem or (kind if mirror is None else f"{kind}-{mirror}")
+            shots.append(BoardShot(name=f"{name}-{first + got:02d}", kind=kind, mirror=mirror,
+                                   board=b, mirrors_covered=not view_rig.mirrors))
             got += 1
 
     camera_rig = replace(rig, mirrors=()) if cover_mirrors_for_camera else rig
@@ -239,5 +284,16 @@ def plan_calibration(rig: Rig, board: Chessboard | None = None, *,
          target=camera_board, view_rig=camera_rig)
     for m in rig.mirrors:
         draw(n_mirror, lambda m=m: _mirror_shot(rig, board, m, rng, volume_mm), "mirror", m.name)
-    draw(n_laser, lambda: _laser_shot(rig, board, rng, volume_mm), "laser")
+    if laser_in_mirror and rig.mirrors:
+        # One at a time, alternating between the mirrors; the sheet must cross the board
+        # near its middle, within ±0.3 squares of its centre height.
+        for k in range(n_laser):
+            m = rig.mirrors[k % len(rig.mirrors)]
+            draw(1, lambda m=m: _mirror_shot(rig, board, m, rng, volume_mm,
+                                             z_mm=0.3 * board.square_mm),
+                 "laser", m.name, check=lambda b: laser_crossing_ok(rig, b), first=k,
+                 stem="laser")
+    else:
+        draw(n_laser, lambda: _laser_shot(rig, board, rng, volume_mm), "laser",
+             check=lambda b: laser_crossing_ok(rig, b, min_cos=0.0, inner=1.0, min_angle_deg=0.0))
     return shots

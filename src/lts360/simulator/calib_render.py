@@ -7,7 +7,9 @@ Camera and mirror shots: the board under bright ambient light, laser off, auto-e
 the whole image; camera shots planned with ``mirrors_covered`` are rendered without the
 mirrors (the manifest says so).  Laser shots (paper Fig. 9): the board auto-exposed for its corners, and a
 laser-on and a laser-off image at one shorter exposure set on the laser-lit pixels, so that
-their difference is the laser line.
+their difference is the laser line.  A laser board planned to be seen in a mirror too
+(``shot.mirror``) is pictured with the mirrors for its corners and with the mirrors covered
+for the line (``laser_mirrors_covered`` in the manifest).
 """
 
 from __future__ import annotations
@@ -84,9 +86,20 @@ def render_calibration_images(rig: Rig, shots: list[BoardShot], out_dir, *, nois
         if shot.kind == "laser":
             # Three pictures of one pose: the board exposed for the board (corners, pose), and
             # laser on / laser off at one exposure set on the line (their difference is the line).
-            on = _render(rig, shot.board, laser_on=True, spp=spp, seed=s, thin_lens=thin_lens)
-            off = _render(rig, shot.board, laser_on=False, spp=spp, seed=s, thin_lens=thin_lens)
-            img_board, _, _ = sensor_image(rig, off, noise=noise, seed=s + 300_000)
+            # A board also seen in a mirror: the line pictures are taken with the mirrors
+            # covered, so that only the direct sheet lights the board (a sheet reflected by a
+            # mirror a little off perpendicular to the laser plane would draw a second line
+            # beside the first); the board picture with the mirrors, for both views.
+            covered = shot.mirror is not None
+            on = _render(rig, shot.board, laser_on=True, spp=spp, seed=s, thin_lens=thin_lens,
+                         mirrors=not covered)
+            off = _render(rig, shot.board, laser_on=False, spp=spp, seed=s, thin_lens=thin_lens,
+                          mirrors=not covered)
+            lit = off if not covered else _render(rig, shot.board, laser_on=False, spp=spp,
+                                                  seed=s + 900_000, thin_lens=thin_lens)
+            img_board, _, _ = sensor_image(rig, lit, noise=noise, seed=s + 300_000)
+            if covered:
+                entry["laser_mirrors_covered"] = True
             img_on, t_exp, _ = sensor_image(rig, on, noise=noise, seed=s)
             img_off, _, _ = sensor_image(rig, off, noise=noise, seed=s + 600_000,
                                          exposure_time_s=t_exp)
