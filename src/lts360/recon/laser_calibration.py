@@ -11,8 +11,10 @@ camera rays, and the rays meet the board plane.  A plane fitted to the points of
 is the laser sheet.  Points of one pose lie on a line, so at least two poses whose lines are
 not parallel are needed: collinear points fail with an error (``fit_plane``).
 
-The line on a plane is straight (after undistortion), so a robust straight-line fit per pose
-takes out the local errors of single centres where black/white edges run under the line.
+The line on a plane is straight (after undistortion): a robust straight-line fit per pose
+through the detected centres starts a fit of the band's image model on the printed board
+(:mod:`lts360.recon.laser_line_model`), which takes out the pull of the black squares on the
+detected centres.
 """
 
 from __future__ import annotations
@@ -169,7 +171,8 @@ def _robust_line(xy: np.ndarray, *, k: float = 3.0, iterations: int = 10):
 def laser_line_points(image_on, image_off, image_board, board: BoardGeometry, K, dist, *,
                       sigma_px: float = 1.5, inset_squares: float = 0.25,
                       min_points: int = 20, pose=None,
-                      pose_views: tuple[str, ...] = ("direct",)) -> LaserLine:
+                      pose_views: tuple[str, ...] = ("direct",),
+                      line_model: bool = True) -> LaserLine:
     """Laser-line points on the board of one pose.
 
     The line centres (Steger) of the laser-on minus laser-off image inside the board's
@@ -193,6 +196,13 @@ def laser_line_points(image_on, image_off, image_board, board: BoardGeometry, K,
         What the pose was fixed by, kept with the result (``("direct", "left")``, …).
     inset_squares : float
         Keep centres at least this many squares inside the printed squares' outline.
+    line_model : bool
+        Refine the detected line by fitting the image model of the band on the printed board
+        (:func:`lts360.recon.laser_line_model.fit_line_on_board`: the albedo under the band
+        and the blur taken into account), and return points along that line.  ``False``: the
+        detected centres, moved onto their straight-line fit.  Measured on rendered paper-board
+        laser shots with the true pose: the line at the board's centre within −10.5…+2.6 µm
+        of the truth with the model, −105…+9 µm without.
 
     Raises
     ------
@@ -239,8 +249,30 @@ def laser_line_points(image_on, image_off, image_board, board: BoardGeometry, K,
     xy_on = p0 + np.outer((xy[inl] - p0) @ direction, direction)
     rays = np.column_stack([xy_on, np.ones(len(xy_on))])
     scale = d_b / (rays @ n_b)
-    return LaserLine(uv=c.uv[inl], points_mm=rays * scale[:, None], board_normal=n_b,
-                     board_d_mm=d_b, pose_views=tuple(pose_views))
+    points = rays * scale[:, None]
+    uv = c.uv[inl]
+    if line_model:
+        from lts360.recon.laser_line_model import fit_line_on_board
+
+        # The detected line in board coordinates starts the fit of the image model.
+        xb = ((points - t) @ R)[:, :2]
+        cen = xb.mean(axis=0)
+        along = np.linalg.svd(xb - cen, full_matrices=False)[2][0]
+        normal = np.array([-along[1], along[0]])
+        fit = fit_line_on_board(diff, image_board, board, R, t, K, dist, initial_normal=normal,
+                                initial_offset_mm=float(normal @ cen),
+                                inset_squares=inset_squares)
+        # Points along the fitted line over the span of the detected centres.
+        n2 = fit.normal
+        a = np.array([-n2[1], n2[0]])
+        span = (xb - cen) @ a
+        k = np.linspace(span.min(), span.max(), len(xb))
+        foot = cen - (cen @ n2 - fit.offset_mm) * n2
+        pb = foot + np.outer(k, a)
+        points = np.column_stack([pb, np.zeros(len(pb))]) @ R.T + t
+        uv = project_camera_points(points, K, dist)
+    return LaserLine(uv=uv, points_mm=points, board_normal=n_b, board_d_mm=d_b,
+                     pose_views=tuple(pose_views))
 
 
 def fit_laser_plane(lines: list[LaserLine], *, min_poses: int = 2) -> LaserPlaneEstimate:

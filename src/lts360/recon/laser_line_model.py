@@ -1,0 +1,146 @@
+"""The laser line on a chessboard by fitting an image model (laser calibration, paper §4.3).
+
+A line detector (Steger, a centroid) finds the centre of the *image* of the laser band.  On a
+chessboard that image is the band times the printed albedo (4 % black against 80 % white),
+blurred by the lens: where the band runs over a black/white edge, the blur mixes the dim and
+the bright side and the centre moves towards the white square.  On the paper's 2 mm squares
+(~18 px) seen 4–5 px out of focus these errors do not average out along a line: measured on
+rendered laser shots of that board with the true board pose, the detected line lay −105 to
++9 µm from the true one at the board's centre.
+
+Here the board's pose is known (from its corners), so the sharp albedo under every pixel is
+known too.  The model of the laser-on minus laser-off image is
+
+    A · G_σ ∗ [ albedo(x) · exp(−½ ((n(φ) · x − c) / w)²) ]
+
+with ``x`` the board coordinates seen by a pixel (4 × 4 samples per pixel, averaged), ``G_σ``
+a Gaussian blur whose σ is fitted first to the board image (``k · G_σ ∗ albedo + b``), and
+the line's direction ``φ``, offset ``c``, band width ``w`` and amplitude ``A`` fitted by
+least squares inside the printed squares.  Measured on the same shots: −10.5 to +2.6 µm.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+from scipy.optimize import least_squares
+
+from lts360.geometry.camera import backproject_pixels, project_camera_points
+from lts360.recon.camera_calibration import BoardGeometry
+
+__all__ = ["BoardLine", "fit_line_on_board"]
+
+_SS = 4  # samples per pixel and axis
+
+
+@dataclass(frozen=True)
+class BoardLine:
+    """A straight line on the board: points ``x`` with ``normal · x = offset_mm`` (board
+    frame, mm), the fitted band width (1 σ, mm), the blur (1 σ, px) and the RMS residual of
+    the fit in the image's units."""
+
+    normal: np.ndarray
+    offset_mm: float
+    width_mm: float
+    blur_px: float
+    rms: float
+
+
+def _board_coords(R, t, K, dist, u0: int, v0: int, h: int, w: int) -> np.ndarray:
+    """(h·S, w·S, 2) board coordinates (mm) of S × S samples in every pixel of the crop."""
+    o = (np.arange(_SS) + 0.5) / _SS - 0.5
+    u = u0 + np.repeat(np.arange(w), _SS) + np.tile(o, w)
+    v = v0 + np.repeat(np.arange(h), _SS) + np.tile(o, h)
+    uu, vv = np.meshgrid(u, v)
+    rays = backproject_pixels(np.column_stack([uu.ravel(), vv.ravel()]), K, dist)
+    n = R[:, 2]
+    X = rays * (float(n @ t) / (rays @ n))[:, None]
+    return ((X - t) @ R)[:, :2].reshape(h * _SS, w * _SS, 2)
+
+
+def _pixel_mean(a: np.ndarray, h: int, w: int) -> np.ndarray:
+    return a.reshape(h, _SS, w, _SS).mean(axis=(1, 3))
+
+
+def fit_line_on_board(diff, image_board, board: BoardGeometry, R, t, K, dist, *,
+                      initial_normal, initial_offset_mm: float,
+                      inset_squares: float = 0.25, margin_px: int = 20) -> BoardLine:
+    """Fit the laser band on the board (module docstring) and return its centre line.
+
+    Parameters
+    ----------
+    diff : (h, w) array
+        Laser-on minus laser-off.
+    image_board : (h, w) array
+        The board under ambient light (its blur and which squares are dark come from it).
+    R, t : the board's pose (board → camera).
+    initial_normal, initial_offset_mm : the line from a line detector (board frame).
+    inset_squares : float
+        The fit uses the pixels at least this many squares inside the printed squares.
+
+    Raises
+    ------
+    ValueError
+        The board lies outside the image, or the fit does not converge.
+    """
+    R, t = np.asarray(R, float), np.asarray(t, float)
+    nx, ny = board.pattern_size
+    s = board.square_mm
+    outline = np.array([[-s, -s, 0.0], [nx * s, -s, 0.0], [nx * s, ny * s, 0.0],
+                        [-s, ny * s, 0.0]])
+    uv = project_camera_points(outline @ R.T + t, K, dist)
+    H, W = np.shape(diff)
+    u0, v0 = np.maximum(np.floor(uv.min(axis=0)).astype(int) - margin_px, 0)
+    u1, v1 = np.minimum(np.ceil(uv.max(axis=0)).astype(int) + margin_px, [W, H])
+    if u1 - u0 < 8 or v1 - v0 < 8:
+        raise ValueError("laser line model: the board lies outside the image")
+    h, w = v1 - v0, u1 - u0
+    xb = _board_coords(R, t, K, dist, u0, v0, h, w)
+    crop = np.asarray(diff, float)[v0:v1, u0:u1]
+    crop_b = np.asarray(image_board, float)[v0:v1, u0:u1]
+    lo, hx, hy = (inset_squares - 1.0) * s, (nx - inset_squares) * s, (ny - inset_squares) * s
+    inside = _pixel_mean(((xb[..., 0] > lo) & (xb[..., 0] < hx) & (xb[..., 1] > lo)
+                          & (xb[..., 1] < hy)).astype(float), h, w) > 0.999
+    if inside.sum() < 50:
+        raise ValueError("laser line model: too few pixels on the board")
+    parity = (np.floor(xb[..., 0] / s) + np.floor(xb[..., 1] / s)) % 2 == 0
+
+    # Blur, dark share and which squares are dark, from the board image.
+    best = None
+    for dark in (parity, ~parity):
+        def board_res(p, dark=dark):
+            sigma, k, b, rho = p
+            a = np.where(dark, rho, 1.0)
+            model = k * ndimage.gaussian_filter(_pixel_mean(a, h, w), abs(sigma)) + b
+            return (model - crop_b)[inside]
+        top = float(np.percentile(crop_b[inside], 95))
+        sol = least_squares(board_res, [1.5, top, 0.0, 0.05],
+                            bounds=([0.05, 0.0, -np.inf, 0.0], [20.0, np.inf, np.inf, 1.0]))
+        if best is None or sol.cost < best[0]:
+            best = (sol.cost, dark, sol.x)
+    _, dark, (sigma, _, _, rho) = best
+    albedo = np.where(dark, rho, 1.0)
+
+    def model(p):
+        phi, c, width, amp = p
+        n = np.array([np.cos(phi), np.sin(phi)])
+        band = np.exp(-0.5 * ((xb @ n - c) / width) ** 2)
+        return amp * ndimage.gaussian_filter(_pixel_mean(albedo * band, h, w), sigma)
+
+    n0 = np.asarray(initial_normal, float)[:2]
+    n0 = n0 / np.linalg.norm(n0)
+    peak = float(crop[inside].max())
+    if peak <= 0:
+        raise ValueError("laser line model: no laser light on the board")
+    p0 = [np.arctan2(n0[1], n0[0]), float(initial_offset_mm), 0.3 * s / 2.0, 2.0 * peak]
+    sol = least_squares(lambda p: (model(p) - crop)[inside], p0,
+                        x_scale=[1e-3, 1e-3 * s, 1e-2 * s, peak],
+                        bounds=([-np.inf, -np.inf, 0.01 * s, 0.0], [np.inf, np.inf, 2.0 * s, np.inf]))
+    if not sol.success:
+        raise ValueError(f"laser line model: the fit did not converge ({sol.message})")
+    phi, c, width, _ = sol.x
+    return BoardLine(normal=np.array([np.cos(phi), np.sin(phi)]), offset_mm=float(c),
+                     width_mm=float(width), blur_px=float(sigma),
+                     rms=float(np.sqrt(np.mean(sol.fun ** 2))))
