@@ -263,7 +263,8 @@ def _cmd_calibrate(args) -> int:
                            images_dir=args.images, spp=args.spp, n_camera=args.camera_poses,
                            n_mirror=args.mirror_poses, n_laser=args.laser_poses, board=board,
                            camera_board=camera_board, tangential=args.tangential,
-                           thin_lens=not args.pinhole, f_number=args.f_number)
+                           thin_lens=not args.pinhole, f_number=args.f_number,
+                           laser_in_mirror=not args.laser_direct)
     print(format_report(report))
     print(f"wrote {out}/calibration.json, report.json, fig8.png")
     return 0
@@ -501,6 +502,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--camera-poses", type=int, default=30)
     s.add_argument("--mirror-poses", type=int, default=6, help="per mirror")
     s.add_argument("--laser-poses", type=int, default=6)
+    s.add_argument("--laser-direct", action="store_true", help="laser boards seen directly only "
+                   "(pose from PnP) instead of directly and in a mirror (pose from both views)")
     s.add_argument("--board", default="7x6x2", help="mirror/laser board: squares x, squares y, "
                    "side mm (paper: 7x6x2)")
     s.add_argument("--camera-board", default=None, help="camera board (default 9x7x8)")

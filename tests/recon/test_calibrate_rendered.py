@@ -2,12 +2,14 @@
 images of a half-resolution camera (640×512 pixels of 10.6 µm: the paper rig's field of view),
 pinhole, 16 spp, a 9×7 × 4 mm target — small enough for CI.
 
-Measured on this configuration (2026-11-23, 10 camera poses): fx +0.20 % (σ reported by OpenCV
-0.57 %: ten half-resolution images determine the camera poorly), mirrors 0.017–0.027° and
-−98/−313 µm (the focal-length error scales every depth), laser plane 0.14° and +28 µm, frame
-origin 0.35 mm.  The tolerances below are about twice those figures: they guard the pipeline
-(handedness, corner order, frames, signs — an error there costs degrees and millimetres), not
-the accuracy of the issue, which needs full resolution and more images (`lts360 calibrate`).
+Measured on this configuration (2026-11-23, 10 camera poses; laser boards seen directly and
+in a mirror, the line fitted as an image model): fx −0.15 % (σ reported by OpenCV ~0.5 %: ten
+half-resolution images determine the camera poorly), mirrors 0.021/0.064° and +147/+121 µm
+(the focal-length error scales every depth), laser plane 0.035° and −13 µm, frame origin
+0.10 mm (third session, laser boards seen directly only: laser 0.14°, origin 0.35 mm).  The
+tolerances below are two to five times those figures: they guard the pipeline (handedness,
+corner order, frames, signs — an error there costs degrees and millimetres), not the accuracy
+of the issue, which needs full resolution and more images (`lts360 calibrate`).
 """
 
 from __future__ import annotations
@@ -68,8 +70,10 @@ def test_estimates_are_near_the_truth(calibrated):
     for name in ("left", "right"):
         assert acc["mirrors"][name]["lsq"]["normal_deg"] < 0.1, acc["mirrors"]
         assert abs(acc["mirrors"][name]["lsq"]["offset_um"]) < 700, acc["mirrors"]
-    assert acc["laser_plane"]["normal_deg"] < 0.4, acc["laser_plane"]
-    assert abs(acc["laser_plane"]["offset_um"]) < 700, acc["laser_plane"]
+    assert acc["laser_plane"]["normal_deg"] < 0.15, acc["laser_plane"]
+    assert abs(acc["laser_plane"]["offset_um"]) < 300, acc["laser_plane"]
+    # Every laser pose was solved from its direct and its mirror view.
+    assert [len(v) for v in report["laser_plane"]["pose_views"]] == [2, 2, 2]
     assert np.linalg.norm(acc["measurement_frame"]["origin_um"]) < 700
 
 

@@ -154,7 +154,8 @@ def plot_fig8(result: RigCalibrationResult, images_dir: Path, path: Path) -> Non
 def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed: int = 0,
                   images_dir=None, spp: int = 64, n_camera: int = 30, n_mirror: int = 6,
                   n_laser: int = 6, board=None, camera_board=None, tangential: bool = False,
-                  thin_lens: bool = True, f_number: float | None = None, say=print) -> dict:
+                  thin_lens: bool = True, f_number: float | None = None,
+                  laser_in_mirror: bool = True, say=print) -> dict:
     """Plan + render (unless ``images_dir``) + calibrate + report.  Returns the report.
 
     ``f_number``: the aperture the calibration images are taken at (default: the rig's, the
@@ -162,6 +163,9 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
     which at the rig's focus (set between the direct and the mirror paths) are blurred by
     4–5 px at f/2.8; with the ideal thin lens simulated here the aperture changes nothing
     else (a real lens may shift its principal point slightly with the aperture).
+
+    ``laser_in_mirror``: laser boards posed so that they are seen in a mirror too (their
+    pose from both views); ``False``: seen directly only (pose from PnP).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -178,7 +182,8 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
 
             rig = replace(rig, camera=replace(rig.camera, f_number=float(f_number)))
         shots = plan_calibration(rig, board, camera_board=camera_board, n_camera=n_camera,
-                                 n_mirror=n_mirror, n_laser=n_laser, seed=seed)
+                                 n_mirror=n_mirror, n_laser=n_laser, seed=seed,
+                                 laser_in_mirror=laser_in_mirror)
         say(f"planned {len(shots)} board poses: {n_camera} camera, {n_mirror} per mirror, "
             f"{n_laser} laser (each laser pose: board, laser on, laser off)")
         tmp = out / ".images.partial"
@@ -201,7 +206,8 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
         report["accuracy"] = calibration_accuracy(result.calibration, truth, result)
     report["settings"] = {"rig": rig_name, "noise": noise, "seed": seed, "spp": spp,
                           "images": str(images_dir), "tangential": tangential,
-                          "thin_lens": thin_lens, "f_number": f_number}
+                          "thin_lens": thin_lens, "f_number": f_number,
+                          "laser_in_mirror": laser_in_mirror}
     text = json.dumps(report, indent=2, default=lambda v: v.tolist() if hasattr(v, "tolist") else str(v))
     (out / "report.json").write_text(text)
     try:
