@@ -3,10 +3,11 @@ images of a half-resolution camera (640×512 pixels of 10.6 µm: the paper rig's
 pinhole, 16 spp, a 9×7 × 4 mm target — small enough for CI.
 
 Measured on this configuration (2026-11-23, 10 camera poses; laser boards seen directly and
-in a mirror, the line fitted as an image model): fx −0.15 % (σ reported by OpenCV ~0.5 %: ten
-half-resolution images determine the camera poorly), mirrors 0.021/0.064° and +147/+121 µm
-(the focal-length error scales every depth), laser plane 0.035° and −13 µm, frame origin
-0.10 mm (third session, laser boards seen directly only: laser 0.14°, origin 0.35 mm).  The
+in a mirror, boards in mirror shots refined by their image model, the line fitted as an image
+model): fx −0.15 % (σ reported by OpenCV ~0.5 %: ten half-resolution images determine the
+camera poorly), mirrors 0.014/0.060° and +130/+90 µm (the focal-length error scales every
+depth), laser plane 0.005° and +54 µm, frame origin 0.12 mm (third session, laser boards seen
+directly only: laser 0.14°, origin 0.35 mm).  The
 tolerances below are two to five times those figures: they guard the pipeline (handedness,
 corner order, frames, signs — an error there costs degrees and millimetres), not the accuracy
 of the issue, which needs full resolution and more images (`lts360 calibrate`).
