@@ -228,11 +228,13 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
     obs: dict[str, list[MirrorObservation]] = {}
     obs_names: dict[str, list[str]] = {}
     laser_obs: dict[str, MirrorObservation] = {}
+    board_images: dict[str, np.ndarray] = {}  # laser shots' board images, read once
     for s in images.shots:
         # Mirror shots, and laser shots whose board is seen in a mirror too: both show a
         # real and a virtual board.
         if s["kind"] == "laser" and s.get("mirror"):
-            ob = detect_real_and_virtual(_read(images.root / s["image_board"]), board, K, dist)
+            board_images[s["name"]] = _read(images.root / s["image_board"])
+            ob = detect_real_and_virtual(board_images[s["name"]], board, K, dist)
             if ob is not None:
                 laser_obs[s["name"]] = ob
         elif s["kind"] == "mirror":
@@ -271,7 +273,9 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
     for s in images.shots:
         if s["kind"] != "laser":
             continue
-        image_board = _read(images.root / s["image_board"])
+        image_board = board_images.pop(s["name"], None)
+        if image_board is None:
+            image_board = _read(images.root / s["image_board"])
         pose, views = None, ("direct",)
         name = s.get("mirror")
         if name in planes:
