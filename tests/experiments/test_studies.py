@@ -126,6 +126,33 @@ def test_monte_carlo_study_end_to_end(tmp_path, truth_calibration):
     assert again["mean_um"] == s["mean_um"]  # resumed from disk: same numbers
 
 
+def test_monte_carlo_compensates_nominal_and_drawn_calibrations_alike(tmp_path,
+                                                                     truth_calibration):
+    """A calibration drawn with no uncertainty is the nominal one: the calibration-only trial
+    and a trial with nothing drawn (the placement input with one placement) must read the same
+    radius.  Before the fix the drawn calibration was compensated at the reference placement
+    and the nominal one used the file's offsets (none here): the two differed."""
+    from lts360.experiments.monte_carlo import _render_placements, mc_trial
+    from lts360.experiments.runner import Trial
+    from lts360.recon.calibration import load_calibration, save_calibration
+
+    path = tmp_path / "calibration.json"
+    save_calibration(path, dataclasses.replace(load_calibration(truth_calibration),
+                                               uncertainty={}))
+    renders = _render_placements(tmp_path, 1, rig="paper", seed=3, spp=4, say=lambda *_: None)
+    base = {"calibration": str(path), "renders": str(renders), "placements": 1, "rig": "paper",
+            "theta_step_deg": 2.0}
+    drawn = mc_trial(Trial(0, dict(base, vary="calibration"), 11)).values["y_um"]
+    nominal = mc_trial(Trial(1, dict(base, vary="placement"), 12)).values["y_um"]
+    assert np.isfinite(drawn) and drawn == pytest.approx(nominal, abs=1e-6)
+    # And the compensation is applied: the file's own (zero) offsets would read otherwise.
+    from lts360.experiments.monte_carlo import _nominal_calibration
+
+    cal = _nominal_calibration(str(path), str(renders), "paper", 2.0)
+    assert set(cal.view_offsets_mm) == {"left", "right"}
+    assert max(np.abs(v).max() for v in cal.view_offsets_mm.values()) > 0
+
+
 def test_examples_and_algorithms_studies_end_to_end(tmp_path):
     if "llvm_ad_mono" not in mi.variants():
         pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
