@@ -240,6 +240,8 @@ def _cmd_calibrate(args) -> int:
         raise UsageError(f"--seed: must be >= 0, got {args.seed}")
     if not 1 <= args.spp <= 4096:
         raise UsageError(f"--spp: must be in [1, 4096], got {args.spp}")
+    if args.target_spp is not None and not 1 <= args.target_spp <= 4096:
+        raise UsageError(f"--target-spp: must be in [1, 4096], got {args.target_spp}")
     if args.f_number is not None and not 0.5 <= args.f_number <= 64:
         raise UsageError(f"--f-number: must be in [0.5, 64], got {args.f_number}")
     if args.camera_poses < 4 or args.mirror_poses < 1 or args.laser_poses < 2:
@@ -264,7 +266,7 @@ def _cmd_calibrate(args) -> int:
                            n_mirror=args.mirror_poses, n_laser=args.laser_poses, board=board,
                            camera_board=camera_board, tangential=args.tangential,
                            thin_lens=not args.pinhole, f_number=args.f_number,
-                           laser_in_mirror=not args.laser_direct)
+                           laser_in_mirror=not args.laser_direct, target_spp=args.target_spp)
     print(format_report(report))
     print(f"wrote {out}/calibration.json, report.json, fig8.png")
     return 0
@@ -499,6 +501,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--images", default=None, help="a folder of real images with manifest.json: "
                    "nothing is rendered")
     s.add_argument("--spp", type=int, default=64, help="samples per pixel of the rendered images")
+    s.add_argument("--target-spp", type=int, default=None, help="samples per pixel of the "
+                   "mirror and laser shots (default: --spp; their small board's defocused "
+                   "edges are where render noise counts)")
     s.add_argument("--camera-poses", type=int, default=30)
     s.add_argument("--mirror-poses", type=int, default=6, help="per mirror")
     s.add_argument("--laser-poses", type=int, default=6)

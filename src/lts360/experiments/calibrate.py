@@ -155,7 +155,8 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
                   images_dir=None, spp: int = 64, n_camera: int = 30, n_mirror: int = 6,
                   n_laser: int = 6, board=None, camera_board=None, tangential: bool = False,
                   thin_lens: bool = True, f_number: float | None = None,
-                  laser_in_mirror: bool = True, say=print) -> dict:
+                  laser_in_mirror: bool = True, target_spp: int | None = None,
+                  say=print) -> dict:
     """Plan + render (unless ``images_dir``) + calibrate + report.  Returns the report.
 
     ``f_number``: the aperture the calibration images are taken at (default: the rig's, the
@@ -166,6 +167,9 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
 
     ``laser_in_mirror``: laser boards posed so that they are seen in a mirror too (their
     pose from both views); ``False``: seen directly only (pose from PnP).
+
+    ``target_spp``: samples per pixel of the mirror and laser shots (default ``spp``); see
+    :func:`lts360.simulator.calib_render.render_calibration_images`.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -190,7 +194,7 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
         shutil.rmtree(tmp, ignore_errors=True)
         bar = _bar(len(shots), "rendering")
         rendered = render_calibration_images(rig, shots, tmp, noise=noise, seed=seed, spp=spp,
-                                             thin_lens=thin_lens,
+                                             thin_lens=thin_lens, target_spp=target_spp,
                                              progress=lambda name: bar.update(1))
         bar.close()
         shutil.rmtree(out / "images", ignore_errors=True)
@@ -205,6 +209,7 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
     if truth is not None:
         report["accuracy"] = calibration_accuracy(result.calibration, truth, result)
     report["settings"] = {"rig": rig_name, "noise": noise, "seed": seed, "spp": spp,
+                          "target_spp": target_spp or spp,
                           "images": str(images_dir), "tangential": tangential,
                           "thin_lens": thin_lens, "f_number": f_number,
                           "laser_in_mirror": laser_in_mirror}
