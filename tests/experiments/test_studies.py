@@ -145,6 +145,9 @@ def test_monte_carlo_compensates_nominal_and_drawn_calibrations_alike(tmp_path,
     drawn = mc_trial(Trial(0, dict(base, vary="calibration"), 11)).values["y_um"]
     nominal = mc_trial(Trial(1, dict(base, vary="placement"), 12)).values["y_um"]
     assert np.isfinite(drawn) and drawn == pytest.approx(nominal, abs=1e-6)
+    # A compensation measured on a noisy reference image moves the result.
+    noisy = mc_trial(Trial(2, dict(base, vary="compensation"), 13)).values["y_um"]
+    assert np.isfinite(noisy) and abs(noisy - nominal) > 1e-3
     # And the compensation is applied: the file's own (zero) offsets would read otherwise.
     from lts360.experiments.monte_carlo import _nominal_calibration
 

@@ -11,6 +11,10 @@ calibration         the estimated calibration drawn from its own covariance (Gau
                     covariance of ``lts360 calibrate``), :func:`sample_calibration`, followed
                     — as in the lab — by a new §4.4 compensation measured with it on the
                     gauge at the reference placement (the first one, noise-free)
+compensation        the §4.4 reference image's own noise: the gauge at the reference placement
+                    re-imaged with new sensor noise and a new speckle pattern, the view offsets
+                    measured on it — one compensation's offsets carry that image's noise into
+                    every later measurement (nominal: the noise-free reference)
 sensor noise        EMVA 1288 temporal noise redrawn (shot, read, quantisation)
 speckle             a new speckle pattern (a new patch of surface under the line)
 placement           one of ``placements`` pre-rendered gauge placements, uniform (offset in a
@@ -64,7 +68,7 @@ from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study
 __all__ = ["INPUTS", "mc_trial", "run_monte_carlo_study", "coverage_interval",
            "adaptive_stable", "dorsch_speckle_limit_um", "format_mc"]
 
-INPUTS = ("calibration", "sensor_noise", "speckle", "placement", "temperature")
+INPUTS = ("calibration", "compensation", "sensor_noise", "speckle", "placement", "temperature")
 
 
 def coverage_interval(y: np.ndarray, p: float = 0.95) -> tuple[float, float]:
@@ -132,9 +136,11 @@ def _calibration(path: str):
     return load_calibration(path)
 
 
-def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float):
+def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
+                noise_seed: int | None = None):
     """``cal`` with the §4.4 view offsets measured with it on the reference placement
-    (``placement_00``, noise-free), whatever offsets ``cal`` held."""
+    (``placement_00``), whatever offsets ``cal`` held.  The reference image is noise-free, or
+    with ``noise_seed`` has realistic sensor noise and a speckle pattern drawn from it."""
     from types import SimpleNamespace
 
     from lts360.recon.compensation import joint_view_offsets
@@ -143,9 +149,12 @@ def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float):
     from lts360.simulator.frame import sensor_image
 
     Y0, L0, _ = _placement(str(Path(renders) / "placement_00"))
+    noisy = noise_seed is not None
     ref, _, _ = sensor_image(load_rig(rig_name), SimpleNamespace(radiance_W_m2_sr=Y0,
                                                                  laser_W_m2_sr=L0),
-                             noise="none", seed=0)
+                             noise="realistic" if noisy else "none",
+                             seed=int(noise_seed) if noisy else 0, speckle=noisy,
+                             speckle_seed=int(noise_seed) + 1 if noisy else None)
     cal = dataclasses.replace(cal, view_offsets_mm={})
     offsets = joint_view_offsets(inverse_triangulate(ref, cal, _grid(theta_step_deg)))
     return dataclasses.replace(cal, view_offsets_mm=offsets)
@@ -197,7 +206,7 @@ def mc_trial(trial: Trial) -> TrialOutput:
     p = trial.params
     vary = set(INPUTS) if p["vary"] == "all" else {p["vary"]}
     rng = np.random.default_rng(trial.seed)
-    seeds = rng.integers(0, 2**31, size=4)
+    seeds = rng.integers(0, 2**31, size=5)
     n_pl = int(p["placements"])
     k = int(rng.integers(n_pl)) if "placement" in vary else 0
     Y, L, meta = _placement(str(Path(p["renders"]) / f"placement_{k:02d}"))
@@ -208,12 +217,14 @@ def mc_trial(trial: Trial) -> TrialOutput:
                                speckle_seed=int(seeds[1]))
     r0 = GAUGE_DIAMETER_MM / 2.0
     step = float(p["theta_step_deg"])
-    if "calibration" in vary:
+    if vary & {"calibration", "compensation"}:
         # A new calibration is followed by a new §4.4 compensation, as in the lab: measure
         # the gauge at the reference placement with it and put the views on one circle.
-        cal = sample_calibration(_calibration(p["calibration"]),
-                                 np.random.default_rng(seeds[2]))
-        cal = _compensate(cal, p["renders"], p["rig"], step)
+        cal = _calibration(p["calibration"])
+        if "calibration" in vary:
+            cal = sample_calibration(cal, np.random.default_rng(seeds[2]))
+        cal = _compensate(cal, p["renders"], p["rig"], step,
+                          noise_seed=int(seeds[4]) if "compensation" in vary else None)
     else:  # the same procedure, once
         cal = _nominal_calibration(p["calibration"], p["renders"], p["rig"], step)
     out = inverse_triangulate(image, cal, _grid(step), compensate=True)
