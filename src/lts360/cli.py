@@ -334,9 +334,10 @@ def _cmd_study_monte_carlo(args) -> int:
     _set_variant(args.variant)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    cal = ensure_calibration(out, args.calibration, seed=args.seed,
-                             compensate=not args.no_compensate)
+    # The study compensates itself (every trial alike, at its reference placement).
+    cal = ensure_calibration(out, args.calibration, seed=args.seed, compensate=False)
     summary = run_monte_carlo_study(out, calibration=cal, trials=args.trials,
+                                    compensate=not args.no_compensate,
                                     adaptive=args.adaptive, batch=args.batch, n_dig=args.digits,
                                     sensitivity_trials=args.sensitivity_trials,
                                     placements=args.placements, workers=args.workers, **common)

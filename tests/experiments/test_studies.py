@@ -148,6 +148,9 @@ def test_monte_carlo_compensates_nominal_and_drawn_calibrations_alike(tmp_path,
     # A compensation measured on a noisy reference image moves the result.
     noisy = mc_trial(Trial(2, dict(base, vary="compensation"), 13)).values["y_um"]
     assert np.isfinite(noisy) and abs(noisy - nominal) > 1e-3
+    # Without the compensation (--no-compensate) the same image reads otherwise.
+    plain = mc_trial(Trial(3, dict(base, vary="placement", compensate=False), 14)).values["y_um"]
+    assert np.isfinite(plain) and abs(plain - nominal) > 1e-3
     # And the compensation is applied: the file's own (zero) offsets would read otherwise.
     from lts360.experiments.monte_carlo import _nominal_calibration
 

@@ -39,9 +39,11 @@ not a formula), so a batch of 10⁴ would take about an hour on two cores — th
 The §4.4 compensation is part of the measurement procedure, so every trial measures with a
 compensated calibration, compensated the same way: the nominal calibration (the file given,
 whatever view offsets it holds) is compensated once at the reference placement, a drawn one
-anew (:func:`_compensate`).  (Until the fifth session the nominal trials used the file's own
-offsets — none for ``lts360 calibrate``'s output — while the drawn ones were compensated: the
-calibration-only run's mean sat 9 µm from the others'.)
+anew (:func:`_compensate`).  Until the fifth session the nominal trials used the offsets of
+the file given — the command line's compensation, on a centred gauge imaged with realistic
+noise — while drawn ones were compensated on the noise-free reference placement: the
+calibration-only run's mean sat 9 µm from the others'.  That gap is one compensation's own
+noise: the ``compensation`` input.
 
 Sensitivity: "one at a time" runs where only one input varies (the others at their nominal
 value: the estimated calibration, no noise, no speckle, the first placement, ΔT = 0) give each
@@ -176,7 +178,7 @@ def _grid(theta_step_deg: float):
 
 @functools.lru_cache(maxsize=16)
 def _nominal_radii(frame_dir: str, cal_path: str, renders: str, rig_name: str,
-                   theta_step_deg: float) -> dict:
+                   theta_step_deg: float, compensate: bool = True) -> dict:
     """Per-view radii of a placement without noise or speckle (the speckle run's reference)."""
     from types import SimpleNamespace
 
@@ -187,8 +189,9 @@ def _nominal_radii(frame_dir: str, cal_path: str, renders: str, rig_name: str,
     Y, L, _ = _placement(frame_dir)
     img, _, _ = sensor_image(load_rig(rig_name), SimpleNamespace(radiance_W_m2_sr=Y,
                                                                   laser_W_m2_sr=L), noise="none")
-    cal = _nominal_calibration(cal_path, renders, rig_name, theta_step_deg)
-    res = inverse_triangulate(img, cal, _grid(theta_step_deg), compensate=True)
+    cal = (_nominal_calibration(cal_path, renders, rig_name, theta_step_deg) if compensate
+           else dataclasses.replace(_calibration(cal_path), view_offsets_mm={}))
+    res = inverse_triangulate(img, cal, _grid(theta_step_deg), compensate=compensate)
     return {n: v.r_mm for n, v in res.views.items()}
 
 
@@ -217,7 +220,11 @@ def mc_trial(trial: Trial) -> TrialOutput:
                                speckle_seed=int(seeds[1]))
     r0 = GAUGE_DIAMETER_MM / 2.0
     step = float(p["theta_step_deg"])
-    if vary & {"calibration", "compensation"}:
+    if not p.get("compensate", True):  # measured without the §4.4 compensation
+        cal = dataclasses.replace(_calibration(p["calibration"]), view_offsets_mm={})
+        if "calibration" in vary:
+            cal = sample_calibration(cal, np.random.default_rng(seeds[2]))
+    elif vary & {"calibration", "compensation"}:
         # A new calibration is followed by a new §4.4 compensation, as in the lab: measure
         # the gauge at the reference placement with it and put the views on one circle.
         cal = _calibration(p["calibration"])
@@ -227,11 +234,11 @@ def mc_trial(trial: Trial) -> TrialOutput:
                           noise_seed=int(seeds[4]) if "compensation" in vary else None)
     else:  # the same procedure, once
         cal = _nominal_calibration(p["calibration"], p["renders"], p["rig"], step)
-    out = inverse_triangulate(image, cal, _grid(step), compensate=True)
+    out = inverse_triangulate(image, cal, _grid(step), compensate=bool(cal.view_offsets_mm))
     extra = {}
     if p["vary"] == "speckle":  # per-point scatter caused by speckle alone (vs. no speckle)
         nominal = _nominal_radii(str(Path(p["renders"]) / f"placement_{k:02d}"), p["calibration"],
-                                 p["renders"], p["rig"], step)
+                                 p["renders"], p["rig"], step, bool(p.get("compensate", True)))
         diffs = np.concatenate([out.views[n].r_mm - nominal[n] for n in out.views])
         extra["speckle_point_std_um"] = float(np.nanstd(diffs) * 1e3)
     pts = np.concatenate([v.points_meas_mm[v.valid, :2] for v in out.views.values()])
@@ -296,13 +303,18 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
                           batch: int = 100, n_dig: int = 2, sensitivity_trials: int = 50,
                           placements: int = 8, seed: int = 0, rig: str = "paper", spp: int = 16,
                           theta_step_deg: float = 0.5, workers: int | None = None,
-                          dask_address: str | None = None, say=print) -> dict:
-    """Run the study (see the module docstring); returns the summary written to summary.json."""
+                          dask_address: str | None = None, compensate: bool = True,
+                          say=print) -> dict:
+    """Run the study (see the module docstring); returns the summary written to summary.json.
+
+    ``compensate=False``: every trial measures without the §4.4 compensation (the view
+    offsets of ``calibration`` are ignored) and the ``compensation`` input is left out."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     renders = _render_placements(out, placements, rig=rig, seed=seed, spp=spp, say=say)
     base = {"calibration": str(Path(calibration).resolve()), "renders": str(renders.resolve()),
-            "placements": placements, "rig": rig, "theta_step_deg": theta_step_deg}
+            "placements": placements, "rig": rig, "theta_step_deg": theta_step_deg,
+            "compensate": bool(compensate)}
     if workers is None and dask_address is None:
         workers = 2
     kw = dict(seed=seed, workers=workers, dask_address=dask_address, say=say)
@@ -314,6 +326,8 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
                "interval95_um": [lo, hi], "adaptive": adaptive, "adaptive_info": info}
     budget = {}
     for name in INPUTS:
+        if name == "compensation" and not compensate:
+            continue
         yi, _ = _run_batches(out, f"only-{name}", dict(base, vary=name), batch=sensitivity_trials,
                              max_batches=1, adaptive=False, n_dig=n_dig, **kw)
         budget[name] = {"u_um": float(yi.std(ddof=1)), "mean_um": float(yi.mean()),
