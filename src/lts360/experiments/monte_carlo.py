@@ -10,7 +10,8 @@ calibration         the estimated calibration drawn from its own covariance (Gau
                     OpenCV's intrinsic σ; mirror and laser planes from the LSQ / jackknife
                     covariance of ``lts360 calibrate``), :func:`sample_calibration`, followed
                     — as in the lab — by a new §4.4 compensation measured with it on the
-                    gauge at the reference placement (the first one, noise-free)
+                    gauge at the reference placement (the first one; its image noise-free
+                    unless the compensation input varies too)
 compensation        the §4.4 reference image's own noise: the gauge at the reference placement
                     re-imaged with new sensor noise and a new speckle pattern, the view offsets
                     measured on it — one compensation's offsets carry that image's noise into
