@@ -77,7 +77,9 @@ def test_vectorised_over_a_batch():
     for method in ("centroid", "gauss", "steger"):
         res = detect_peaks(method, prof, R_MM, threshold=THR)
         one = detect_peaks(method, prof[17:18], R_MM, threshold=THR)
-        assert res.r_mm.shape == (500,) and res.r_mm[17] == one.r_mm[0]
+        # The same result as alone, to rounding: numpy's SIMD paths differ with the array
+        # length, so the last bit may (seen once in CI: 2e-15 mm).
+        assert res.r_mm.shape == (500,) and abs(res.r_mm[17] - one.r_mm[0]) <= 1e-12
         assert np.max(np.abs(res.r_mm - centres)) / STEP_MM < max(TOL[method], 0.02)
 
 
