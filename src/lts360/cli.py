@@ -244,6 +244,8 @@ def _cmd_calibrate(args) -> int:
         raise UsageError(f"--target-spp: must be in [1, 4096], got {args.target_spp}")
     if args.f_number is not None and not 0.5 <= args.f_number <= 64:
         raise UsageError(f"--f-number: must be in [0.5, 64], got {args.f_number}")
+    if args.camera_model is not None and not 0 <= args.camera_model <= 5:
+        raise UsageError(f"--camera-model: must be in [0, 5], got {args.camera_model}")
     if args.camera_poses < 4 or args.mirror_poses < 1 or args.laser_poses < 2:
         raise UsageError("--camera-poses >= 4, --mirror-poses >= 1 and --laser-poses >= 2 needed, "
                          f"got {args.camera_poses}, {args.mirror_poses}, {args.laser_poses}")
@@ -266,7 +268,8 @@ def _cmd_calibrate(args) -> int:
                            n_mirror=args.mirror_poses, n_laser=args.laser_poses, board=board,
                            camera_board=camera_board, tangential=args.tangential,
                            thin_lens=not args.pinhole, f_number=args.f_number,
-                           laser_in_mirror=not args.laser_direct, target_spp=args.target_spp)
+                           laser_in_mirror=not args.laser_direct, target_spp=args.target_spp,
+                           camera_model_rounds=args.camera_model)
     print(format_report(report))
     print(f"wrote {out}/calibration.json, report.json, fig8.png")
     return 0
@@ -506,6 +509,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "mirror and laser shots (default: --spp; their small board's defocused "
                    "edges are where render noise counts)")
     s.add_argument("--camera-poses", type=int, default=30)
+    s.add_argument("--camera-model", type=int, default=None, metavar="ROUNDS",
+                   help="rounds of Zhang's method on the camera boards' corners from their "
+                   "image model (default 0: on the detected corners)")
     s.add_argument("--mirror-poses", type=int, default=6, help="per mirror")
     s.add_argument("--laser-poses", type=int, default=6)
     s.add_argument("--laser-direct", action="store_true", help="laser boards seen directly only "

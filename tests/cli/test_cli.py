@@ -24,6 +24,7 @@ def run(*args):
     (("calibrate", "--out", "c", "--images", "no-such-dir"), "--images"),
     (("calibrate", "--out", "c", "--board", "7x6"), "--board"),
     (("calibrate", "--out", "c", "--laser-poses", "1"), "--laser-poses"),
+    (("calibrate", "--out", "c", "--camera-model", "-1"), "--camera-model"),
     (("study", "plug-gauge", "--out", "s", "--trials", "0"), "--trials"),
     (("study", "plug-gauge", "--out", "s", "--calibration", "nope.json"), "--calibration"),
     (("study", "design-space", "--out", "s", "--alpha-deg", "40:20:5"), "--alpha-deg"),

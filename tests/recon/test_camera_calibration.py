@@ -153,3 +153,56 @@ def test_symmetrized_corners_do_not_depend_on_the_board_handedness():
         _, j = cKDTree(true).query(corners)
         rms = np.sqrt(np.mean(np.sum((corners - true[j]) ** 2, axis=1)))
         assert rms < 0.12
+
+
+def _board_image(R, t, K, geo, *, size=(360, 300), blur_px=1.5, ss=4):
+    """A board (4 % / 80 % albedo, 2 mm light margin, grey beyond) at pose (R, t), hard
+    edges sampled ``ss × ss`` per pixel, Gaussian blur, 200 units at full light."""
+    from scipy import ndimage
+
+    w, h = size
+    o = (np.arange(ss) + 0.5) / ss - 0.5
+    u, v = np.meshgrid(np.repeat(np.arange(w), ss) + np.tile(o, w),
+                       np.repeat(np.arange(h), ss) + np.tile(o, h))
+    rays = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], -1)
+    n = R[:, 2]
+    xb = (rays * ((n @ t) / (rays @ n))[..., None] - t) @ R
+    s = geo.square_mm
+    nx, ny = geo.pattern_size
+    inside = ((xb[..., 0] > -s) & (xb[..., 0] < nx * s) & (xb[..., 1] > -s)
+              & (xb[..., 1] < ny * s))
+    plate = ((xb[..., 0] > -s - 2) & (xb[..., 0] < nx * s + 2) & (xb[..., 1] > -s - 2)
+             & (xb[..., 1] < ny * s + 2))
+    dark = (np.floor(xb[..., 0] / s) + np.floor(xb[..., 1] / s)) % 2 == 0
+    albedo = np.where(inside & dark, 0.04, np.where(plate, 0.80, 0.3))
+    pix = albedo.reshape(h, ss, w, ss).mean(axis=(1, 3))
+    return 200.0 * ndimage.gaussian_filter(pix, blur_px)
+
+
+def test_the_board_model_rounds_calibrate_the_camera_from_every_pixel():
+    """Eight synthetic board images (hard edges, 1.5 px blur, no noise, squares ~17 px) of a
+    62° camera.  SB's corners are 0.1–0.3 px off here and Zhang's method on them is poor
+    (fx −5.7 %, k1/k2 +0.09/−0.49).  One round on the corners of the image model of the
+    squares around each: fx within 0.05 %, the principal point within 0.1 px, k1, k2 within
+    0.02 of the true zero and 0.01 px RMS (measured: +0.017 %, +0.04/−0.01 px,
+    +0.005/−0.012, 0.004 px; one image dropped as an outlier)."""
+    from scipy.spatial.transform import Rotation
+
+    K = np.array([[300.0, 0.0, 181.3], [0.0, 300.0, 148.6], [0.0, 0.0, 1.0]])
+    geo = BoardGeometry((7, 5), 4.0)
+    centre = np.array([14.0, 10.0, 0.0])
+    images = []
+    for k, (ax, ay, dx, dy) in enumerate([(25, 0, -3, -2), (-25, 0, 3, 2), (0, 25, 2, -3),
+                                          (0, -25, -2, 3), (20, 20, 0, 0), (-20, 20, 4, 0),
+                                          (20, -20, 0, 4), (-20, -20, -4, -4)]):
+        R = Rotation.from_euler("xyz", [180.0 + ax, ay, 10.0 * k], degrees=True).as_matrix()
+        t = np.array([dx, dy, 70.0]) - R @ centre
+        images.append(_board_image(R, t, K, geo))
+    sb = calibrate_camera(images, geo, zero_tangent=True)
+    cal = calibrate_camera(images, geo, zero_tangent=True, board_model_rounds=1)
+    assert cal.used.sum() >= 7
+    assert abs(cal.K[0, 0] / K[0, 0] - 1) < 5e-4 and abs(cal.K[1, 1] / K[1, 1] - 1) < 5e-4
+    assert np.all(np.abs(cal.K[:2, 2] - K[:2, 2]) < 0.1)
+    assert np.all(np.abs(cal.dist[:2]) < 0.02)
+    assert cal.rms_px < 0.01 < sb.rms_px
+    assert abs(sb.K[0, 0] / K[0, 0] - 1) > 10 * abs(cal.K[0, 0] / K[0, 0] - 1)

@@ -156,7 +156,7 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
                   n_laser: int = 6, board=None, camera_board=None, tangential: bool = False,
                   thin_lens: bool = True, f_number: float | None = None,
                   laser_in_mirror: bool = True, target_spp: int | None = None,
-                  say=print) -> dict:
+                  camera_model_rounds: int | None = None, say=print) -> dict:
     """Plan + render (unless ``images_dir``) + calibrate + report.  Returns the report.
 
     ``f_number``: the aperture the calibration images are taken at (default: the rig's, the
@@ -170,7 +170,13 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
 
     ``target_spp``: samples per pixel of the mirror and laser shots (default ``spp``); see
     :func:`lts360.simulator.calib_render.render_calibration_images`.
+
+    ``camera_model_rounds``: see :func:`lts360.recon.calibrate.calibrate_rig` (default there).
     """
+    from lts360.recon.calibrate import CAMERA_MODEL_ROUNDS
+
+    if camera_model_rounds is None:
+        camera_model_rounds = CAMERA_MODEL_ROUNDS
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     truth = None
@@ -203,7 +209,8 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
         write_json(out / "truth.json", truth)
         images_dir = out / "images"
     images = read_calibration_images(images_dir)
-    result = calibrate_rig(images, tangential=tangential, progress=say)
+    result = calibrate_rig(images, tangential=tangential, progress=say,
+                           camera_model_rounds=camera_model_rounds)
     save_calibration(out / "calibration.json", result.calibration)
     report = calibration_report(result)
     if truth is not None:
@@ -212,7 +219,8 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
                           "target_spp": target_spp or spp,
                           "images": str(images_dir), "tangential": tangential,
                           "thin_lens": thin_lens, "f_number": f_number,
-                          "laser_in_mirror": laser_in_mirror}
+                          "laser_in_mirror": laser_in_mirror,
+                          "camera_model_rounds": camera_model_rounds}
     text = json.dumps(report, indent=2, default=lambda v: v.tolist() if hasattr(v, "tolist") else str(v))
     (out / "report.json").write_text(text)
     try:

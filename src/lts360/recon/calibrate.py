@@ -193,8 +193,13 @@ def _plane_unc(n, d, lsq_cov, groups_abd) -> dict:
     return out
 
 
+# Rounds of the camera calibration on the boards' image model (see calibrate_rig).
+CAMERA_MODEL_ROUNDS = 0
+
+
 def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
-                  progress=None, use_laser_boards_for_mirrors: bool = True) -> RigCalibrationResult:
+                  progress=None, use_laser_boards_for_mirrors: bool = True,
+                  camera_model_rounds: int = CAMERA_MODEL_ROUNDS) -> RigCalibrationResult:
     """Calibrate camera, mirrors and laser plane from the manifest's images.
 
     ``tangential``: estimate the tangential distortion p1, p2 too.  Off by default — k1, k2
@@ -205,6 +210,10 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
     ``use_laser_boards_for_mirrors``: a laser shot whose board is seen in a mirror too adds
     that real/virtual pair to the mirror's fit (its pose is taken from both views in any
     case).
+
+    ``camera_model_rounds``: rounds of Zhang's method on the camera boards' corners from
+    their image model (``board_model_rounds`` of
+    :func:`lts360.recon.camera_calibration.calibrate_camera`); 0: on the detected corners.
 
     Raises
     ------
@@ -219,7 +228,10 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
             direct.append(_read(images.root / s["image"]))
             names.append(s["name"])
     say(f"camera: Zhang's method on {len(direct)} images")
-    cam = calibrate_camera(direct, images.camera_board, zero_tangent=not tangential)
+    cam = calibrate_camera(direct, images.camera_board, zero_tangent=not tangential,
+                           board_model_rounds=camera_model_rounds,
+                           progress=lambda i, n: say(f"camera: board model {i}/{n}")
+                           if i == n else None)
     K, dist = cam.K, cam.dist
     used_names = tuple(n for n, u in zip(names, cam.used) if u)
 

@@ -183,7 +183,8 @@ def detect_corners(image, board: BoardGeometry, *, symmetrize: bool = True,
 def calibrate_camera(images, board: BoardGeometry, *, max_image_rms_px: float = 0.5,
                      outlier_factor: float = 3.0, fix_k3: bool = True,
                      zero_tangent: bool = False, min_images: int = 4,
-                     corner_outlier_px: float = 0.25) -> CameraCalibration:
+                     corner_outlier_px: float = 0.25, board_model_rounds: int = 0,
+                     model_outlier_px: float = 0.05, progress=None) -> CameraCalibration:
     """Zhang calibration of the camera from images of a chessboard.
 
     ``fix_k3`` keeps k3 = 0 and ``zero_tangent`` keeps p1 = p2 = 0 (OpenCV's
@@ -196,6 +197,15 @@ def calibrate_camera(images, board: BoardGeometry, *, max_image_rms_px: float = 
     8 mm board, 64 spp): OpenCV's SB detector placed a few corners of 4 of 40 images 0.9 to
     5 px off their true projections; left out, fx moved by 0.07 % and cy by 0.6 px (of
     20 of those poses, taken with the mirrors in place).
+
+    ``board_model_rounds`` > 0: then place every corner of the kept boards by the image
+    model of the four squares around it
+    (:func:`lts360.recon.board_model.refine_corners_locally`: the corners follow the image
+    whatever the current camera model) and calibrate again on those corners, that many
+    times, leaving out corners as above with ``model_outlier_px`` for ``corner_outlier_px``
+    (the model's corners are ~5 times more precise).  Slow (LM per corner) but every pixel
+    of the squares counts, not only those next to the corner.  See STUDIES.md for what it
+    changes.  ``progress(i, n)`` is called after each board.
 
     Raises
     ------
@@ -217,30 +227,68 @@ def calibrate_camera(images, board: BoardGeometry, *, max_image_rms_px: float = 
     keep = [None if c is None else np.ones(len(c), bool) for c in found]
     flags = (cv2.CALIB_FIX_K3 if fix_k3 else 0) | (cv2.CALIB_ZERO_TANGENT_DIST if zero_tangent else 0)
     crit = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-12)
-    for _ in range(5):  # calibrate, drop outlier corners and images, calibrate again
-        idx = np.flatnonzero(used)
-        if len(idx) < min_images:
-            raise ValueError(f"calibrate_camera: only {len(idx)} usable images, need {min_images}")
-        objs = [obj[keep[i]] for i in idx]
-        pts = [found[i][keep[i]].astype(np.float32) for i in idx]
-        rms, K, dist, rvecs, tvecs, std_i, _, per_view = cv2.calibrateCameraExtended(
-            objs, pts, (w, h), None, None, flags=flags, criteria=crit)
-        per_view = per_view.ravel()
-        # Every detected corner against this calibration (the left-out ones too).
-        err = [np.linalg.norm(cv2.projectPoints(obj, r, t, K, dist)[0].reshape(-1, 2)
-                              - found[i], axis=1) for i, r, t in zip(idx, rvecs, tvecs)]
-        limit = corner_outlier_limit(np.concatenate(err), corner_outlier_px)
-        new_keep = {i: e <= limit for i, e in zip(idx, err)}
-        bad = (per_view > max_image_rms_px) | (per_view > outlier_factor * np.median(per_view))
-        bad |= np.array([new_keep[i].mean() < 0.75 for i in idx])  # a quarter of it wrong
-        changed = any(not np.array_equal(new_keep[i], keep[i]) for i in idx)
-        if not bad.any() and not changed:
-            break
-        for i in idx:
-            keep[i] = new_keep[i]
-        used[idx[bad]] = False
+    for model_round in range(board_model_rounds + 1):
+        if model_round > 0:  # the corners from the image model, from the last calibration
+            idx = np.flatnonzero(used)
+            model = _board_model_corners([images[i] for i in idx], board, K, dist.ravel()[:5],
+                                         rvecs, tvecs, progress)
+            for i, m in zip(idx, model):
+                found[i] = m
+                keep[i] = np.isfinite(m).all(axis=1)  # a patch the model could not fit
+        floor = corner_outlier_px if model_round == 0 else model_outlier_px
+        for _ in range(5):  # calibrate, drop outlier corners and images, calibrate again
+            idx = np.flatnonzero(used)
+            if len(idx) < min_images:
+                raise ValueError(f"calibrate_camera: only {len(idx)} usable images, "
+                                 f"need {min_images}")
+            objs = [obj[keep[i]] for i in idx]
+            pts = [found[i][keep[i]].astype(np.float32) for i in idx]
+            rms, K, dist, rvecs, tvecs, std_i, _, per_view = cv2.calibrateCameraExtended(
+                objs, pts, (w, h), None, None, flags=flags, criteria=crit)
+            per_view = per_view.ravel()
+            # Every corner against this calibration (the left-out ones too; NaN: not found).
+            err = [np.linalg.norm(cv2.projectPoints(obj, r, t, K, dist)[0].reshape(-1, 2)
+                                  - found[i], axis=1) for i, r, t in zip(idx, rvecs, tvecs)]
+            all_err = np.concatenate(err)
+            limit = corner_outlier_limit(all_err[np.isfinite(all_err)], floor)
+            new_keep = {i: np.nan_to_num(e, nan=np.inf) <= limit for i, e in zip(idx, err)}
+            bad = ((per_view > max_image_rms_px)
+                   | (per_view > outlier_factor * np.median(per_view)))
+            bad |= np.array([new_keep[i].mean() < 0.75 for i in idx])  # a quarter of it wrong
+            changed = any(not np.array_equal(new_keep[i], keep[i]) for i in idx)
+            if not bad.any() and not changed:
+                break
+            for i in idx:
+                keep[i] = new_keep[i]
+            used[idx[bad]] = False
+    corners = [found[i] for i in idx]
+    kept = [keep[i].copy() for i in idx]
     return CameraCalibration(K=K, dist=dist.ravel()[:5], image_size=(w, h), rms_px=float(rms),
                              per_image_rms_px=per_view, used=used, std_intrinsics=std_i.ravel(),
                              rvecs=[r.ravel() for r in rvecs], tvecs=[t.ravel() for t in tvecs],
-                             corners=[found[i] for i in idx],
-                             corner_kept=[keep[i].copy() for i in idx])
+                             corners=corners, corner_kept=kept)
+
+
+def _board_model_corners(images, board, K, dist, rvecs, tvecs, progress=None) -> list:
+    """Every board's corners from the image model of the squares around each (NaN where
+    the fit failed), from the board's current pose; the boards fitted in parallel threads
+    (numpy and scipy release the GIL)."""
+    import os
+    from concurrent.futures import ThreadPoolExecutor
+
+    import cv2
+
+    from lts360.recon.board_model import refine_corners_locally
+
+    def one(args):
+        image, r, t = args
+        return refine_corners_locally(image, board, cv2.Rodrigues(np.ravel(r))[0], np.ravel(t),
+                                      K, dist)[0]
+
+    out = []
+    with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
+        for i, c in enumerate(pool.map(one, zip(images, rvecs, tvecs))):
+            out.append(c)
+            if progress is not None:
+                progress(i + 1, len(images))
+    return out
