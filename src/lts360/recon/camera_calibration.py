@@ -70,7 +70,8 @@ class CameraCalibration:
     rvecs, tvecs : list of (3,) float
         Board poses of the kept images (board → camera).
     corners : list of (n, 2) float
-        Detected corners of the kept images.
+        Corners of the kept images: detected, or from the image model after
+        ``board_model_rounds`` (NaN where its fit failed).
     corner_kept : list of (n,) bool
         Which of them the calibration used (the others were outliers).
     """
