@@ -304,16 +304,23 @@ def _study_common(args) -> dict:
     return {"seed": args.seed, "dask_address": args.dask}
 
 
+def _check_shots(shots: int) -> None:
+    if not 1 <= shots <= 100:
+        raise UsageError(f"--compensation-shots: must be in [1, 100], got {shots}")
+
+
 def _cmd_study_plug_gauge(args) -> int:
     from lts360.experiments.gauge_study import format_gauge_table, run_plug_gauge_study
 
     common = _study_common(args)
     if not 1 <= args.trials <= 10000:
         raise UsageError(f"--trials: must be in [1, 10000], got {args.trials}")
+    _check_shots(args.compensation_shots)
     _optional_file(args.calibration, "--calibration")
     _set_variant(args.variant)
     table = run_plug_gauge_study(args.out, trials=args.trials, calibration=args.calibration,
                                  noise=args.noise, spp=args.spp,
+                                 compensation_shots=args.compensation_shots,
                                  workers=args.workers or 1, **common)
     print(format_gauge_table(table))
     print(f"wrote {args.out}/ (table.txt, table.json, plug-gauge.png, trials/results.nc)")
@@ -333,6 +340,7 @@ def _cmd_study_monte_carlo(args) -> int:
         raise UsageError(f"--placements: must be in [1, 100], got {args.placements}")
     if not 1 <= args.digits <= 4:
         raise UsageError(f"--digits: must be in [1, 4], got {args.digits}")
+    _check_shots(args.compensation_shots)
     _optional_file(args.calibration, "--calibration")
     _set_variant(args.variant)
     out = Path(args.out)
@@ -341,6 +349,7 @@ def _cmd_study_monte_carlo(args) -> int:
     cal = ensure_calibration(out, args.calibration, seed=args.seed, compensate=False)
     summary = run_monte_carlo_study(out, calibration=cal, trials=args.trials,
                                     compensate=not args.no_compensate,
+                                    compensation_shots=args.compensation_shots,
                                     adaptive=args.adaptive, batch=args.batch, n_dig=args.digits,
                                     sensitivity_trials=args.sensitivity_trials,
                                     placements=args.placements, workers=args.workers, **common)
@@ -550,6 +559,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "from rendered images into OUT/calibration/)")
     q.add_argument("--noise", choices=("none", "realistic"), default="realistic")
     q.add_argument("--spp", type=int, default=16)
+    q.add_argument("--compensation-shots", type=int, default=1, metavar="K",
+                   help="images of the gauge (turned between them) the §4.4 compensation is "
+                   "fitted to (default 1, as the paper)")
     q.set_defaults(func=_cmd_study_plug_gauge)
 
     q = study_parser("monte-carlo", "GUM Supplement 1 Monte Carlo of the gauge radius, GUM "
@@ -565,6 +577,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="trials per input in the one-at-a-time runs")
     q.add_argument("--placements", type=int, default=8, help="rendered gauge placements")
     q.add_argument("--no-compensate", action="store_true", help="no §4.4 compensation")
+    q.add_argument("--compensation-shots", type=int, default=1, metavar="K",
+                   help="images of the reference placement each §4.4 compensation is fitted "
+                   "to (default 1, as the paper)")
     q.set_defaults(func=_cmd_study_monte_carlo)
 
     q = study_parser("examples", "paper §4.6: the eight objects scanned with the paper's "

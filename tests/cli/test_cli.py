@@ -30,6 +30,8 @@ def run(*args):
     (("study", "design-space", "--out", "s", "--alpha-deg", "40:20:5"), "--alpha-deg"),
     (("study", "design-space", "--out", "s", "--draws", "1"), "--draws"),
     (("study", "monte-carlo", "--out", "s", "--trials", "1"), "--trials"),
+    (("study", "monte-carlo", "--out", "s", "--compensation-shots", "0"), "--compensation-shots"),
+    (("study", "plug-gauge", "--out", "s", "--compensation-shots", "101"), "--compensation-shots"),
     (("study", "examples", "--out", "s", "--objects", "teapot"), "teapot"),
     (("study", "algorithms", "--out", "s", "--workers", "2", "--dask", "tcp://x:1"), "--dask"),
     (("study", "nonsense", "--out", "s"), "nonsense"),

@@ -157,6 +157,23 @@ def test_monte_carlo_compensates_nominal_and_drawn_calibrations_alike(tmp_path,
     cal = _nominal_calibration(str(path), str(renders), "paper", 2.0)
     assert set(cal.view_offsets_mm) == {"left", "right"}
     assert max(np.abs(v).max() for v in cal.view_offsets_mm.values()) > 0
+    # Several reference shots: the same first shot and more, so another compensation.
+    four = mc_trial(Trial(2, dict(base, vary="compensation", compensation_shots=4), 13))
+    assert np.isfinite(four.values["y_um"]) and abs(four.values["y_um"] - noisy) > 1e-4
+
+
+def test_the_gauge_study_compensates_from_several_shots(tmp_path, truth_calibration):
+    from lts360.experiments.gauge_study import _compensated_calibration
+    from lts360.recon.calibration import load_calibration
+
+    path = _compensated_calibration(truth_calibration, tmp_path, rig="paper", noise="none",
+                                    spp=2, seed=0, shots=2)
+    assert path.name == "calibration-compensated-2shots.json"
+    off = load_calibration(path).view_offsets_mm
+    assert set(off) == {"left", "right"} and all(np.all(np.isfinite(v)) for v in off.values())
+    with pytest.raises(ValueError, match="shots"):
+        _compensated_calibration(truth_calibration, tmp_path, rig="paper", noise="none",
+                                 spp=2, seed=0, shots=0)
 
 
 def test_examples_and_algorithms_studies_end_to_end(tmp_path):

@@ -61,3 +61,37 @@ def test_too_few_points_is_a_clear_error():
         joint_view_offsets(res)
     with pytest.raises(ValueError, match="no view 'front'"):
         joint_view_offsets(res, reference="front")
+
+
+def _shot(centre, shifts, r, seed, noise_mm):
+    c = np.asarray(centre, float)
+    moved = {v: c + np.asarray(shifts.get(v, (0.0, 0.0))) for v in ARCS}
+    return _result(moved, r=r, seed=seed, noise_mm=noise_mm)
+
+
+def test_several_shots_share_the_offsets_and_average_their_noise():
+    """Each shot its own circle (the reference moved between shots), one offset per view."""
+    shifts = {"left": (0.020, -0.010), "right": (-0.030, 0.005)}
+    shots = [_shot((0.3 * k, -0.2 * k), shifts, 10.0 + 0.01 * k, seed=k, noise_mm=1e-5)
+             for k in range(3)]
+    off = joint_view_offsets(shots)
+    for name, s in shifts.items():
+        np.testing.assert_allclose(off[name], -np.asarray(s), atol=1e-5)
+    err = {1: [], 4: []}
+    for seed in range(16):
+        for k in err:
+            res = [_shot((0.1 * j, 0.0), {}, 10.0, seed=100 * seed + j, noise_mm=0.005)
+                   for j in range(k)]
+            err[k].append(joint_view_offsets(res if k > 1 else res[0])["left"])
+    rms = {k: float(np.sqrt(np.mean(np.square(v)))) for k, v in err.items()}
+    assert rms[4] < 0.65 * rms[1], rms  # 1/√4 = 0.5 expected
+
+
+def test_shots_with_different_views_are_refused():
+    a = _result({})
+    b = _result({})
+    del b.views["right"]
+    with pytest.raises(ValueError, match="different views"):
+        joint_view_offsets([a, b])
+    with pytest.raises(ValueError, match="no measurement"):
+        joint_view_offsets([])

@@ -209,10 +209,11 @@ def format_gauge_table(ours: dict) -> str:
 
 
 def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str, spp: int,
-                             seed: int) -> Path:
-    """§4.4: measure the gauge once at the nominal position, put the mirror views on one circle
-    with the direct view (:func:`lts360.recon.compensation.joint_view_offsets`), store their
-    offsets in a copy of the calibration."""
+                             seed: int, shots: int = 1) -> Path:
+    """§4.4: measure the gauge at the nominal position (``shots`` times, turned about its axis
+    between shots: new speckle, new sensor noise), put the mirror views on one circle with the
+    direct view (:func:`lts360.recon.compensation.joint_view_offsets`, all shots jointly),
+    store their offsets in a copy of the calibration."""
     import dataclasses
 
     import mitsuba as mi
@@ -225,18 +226,23 @@ def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str,
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import simulate_frame
 
-    path = out / "calibration-compensated.json"
+    if not 1 <= int(shots) <= 100:
+        raise ValueError(f"compensation shots must be in [1, 100], got {shots}")
+    path = out / ("calibration-compensated.json" if shots == 1
+                  else f"calibration-compensated-{int(shots)}shots.json")
     if path.is_file():
         return path
     if mi.variant() is None:
         mi.set_variant("llvm_ad_mono")
     cal = load_calibration(cal_path)
     obj = build_object(f"plug-gauge:d={GAUGE_DIAMETER_MM}")
-    frame = simulate_frame(load_rig(rig), obj, spp=spp, seed=seed + 777_777, noise=noise)
     r = GAUGE_DIAMETER_MM / 2
     grid = CylGrid.from_ranges((r - 1.0, r + 1.0), theta_step_deg=0.1, r_step_mm=0.005)
-    res = inverse_triangulate(frame.image, cal, grid)
-    offsets = joint_view_offsets(res)
+    results = []
+    for k in range(int(shots)):
+        frame = simulate_frame(load_rig(rig), obj, spp=spp, seed=seed + 777_777 + k, noise=noise)
+        results.append(inverse_triangulate(frame.image, cal, grid))
+    offsets = joint_view_offsets(results)
     cal = dataclasses.replace(cal, view_offsets_mm=offsets)
     save_calibration(path, cal)
     return path
@@ -244,10 +250,12 @@ def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str,
 
 def ensure_calibration(out: Path, calibration=None, *, rig: str = "paper", noise: str = "realistic",
                        seed: int = 0, spp: int = 16, compensate: bool = True,
-                       calibrate_options: dict | None = None, say=print) -> Path:
+                       calibrate_options: dict | None = None, compensation_shots: int = 1,
+                       say=print) -> Path:
     """The calibration a study measures with: ``calibration`` if given, else one estimated from
     rendered chessboard images into ``out/calibration/`` (kept for the next run); with
-    ``compensate``, a copy with the §4.4 view offsets (``out/calibration-compensated.json``)."""
+    ``compensate``, a copy with the §4.4 view offsets from ``compensation_shots`` shots of the
+    gauge (``out/calibration-compensated[-Kshots].json``)."""
     from lts360.experiments.calibrate import run_calibrate
 
     if calibration is None:
@@ -260,7 +268,7 @@ def ensure_calibration(out: Path, calibration=None, *, rig: str = "paper", noise
     calibration = Path(calibration)
     if compensate:
         calibration = _compensated_calibration(calibration, out, rig=rig, noise=noise, spp=spp,
-                                               seed=seed)
+                                               seed=seed, shots=compensation_shots)
     return calibration
 
 
@@ -268,7 +276,7 @@ def run_plug_gauge_study(out_dir, *, trials: int = 10, seed: int = 0, calibratio
                          noise: str = "realistic", spp: int = 16, rig: str = "paper",
                          compensate: bool = True, workers: int | None = 1,
                          dask_address: str | None = None, calibrate_options: dict | None = None,
-                         say=print) -> dict:
+                         compensation_shots: int = 1, say=print) -> dict:
     """Calibrate (unless ``calibration``), compensate, measure ``trials`` placements, tabulate."""
     from lts360.experiments.calibrate import run_calibrate
 
@@ -276,7 +284,7 @@ def run_plug_gauge_study(out_dir, *, trials: int = 10, seed: int = 0, calibratio
     out.mkdir(parents=True, exist_ok=True)
     calibration = ensure_calibration(out, calibration, rig=rig, noise=noise, seed=seed, spp=spp,
                                      compensate=compensate, calibrate_options=calibrate_options,
-                                     say=say)
+                                     compensation_shots=compensation_shots, say=say)
     params = [dict(p, calibration=str(calibration.resolve()), noise=noise, spp=spp, rig=rig,
                    compensate=compensate, clouds=str((out / "clouds").resolve()))
               for p in gauge_placements(trials, seed)]
