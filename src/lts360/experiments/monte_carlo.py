@@ -7,15 +7,18 @@ Inputs and their distributions (each drawn independently per trial):
 
 ==================  ==========================================================================
 calibration         the estimated calibration drawn from its own covariance (Gaussian:
-                    OpenCV's intrinsic σ; mirror and laser planes from the LSQ / jackknife
-                    covariance of ``lts360 calibrate``), :func:`sample_calibration`, followed
+                    the intrinsics' jackknife covariance over the boards, or OpenCV's σ for
+                    a calibration without one; mirror and laser planes from the LSQ /
+                    jackknife covariance of ``lts360 calibrate``), :func:`sample_calibration`,
+                    followed
                     — as in the lab — by a new §4.4 compensation measured with it on the
                     gauge at the reference placement (the first one; its image noise-free
                     unless the compensation input varies too)
 compensation        the §4.4 reference image's own noise: the gauge at the reference placement
                     re-imaged with new sensor noise and a new speckle pattern, the view offsets
                     measured on it — one compensation's offsets carry that image's noise into
-                    every later measurement (nominal: the noise-free reference)
+                    every later measurement (nominal: the noise-free reference); with
+                    ``compensation_shots`` K, K such images fitted jointly
 sensor noise        EMVA 1288 temporal noise redrawn (shot, read, quantisation)
 speckle             a new speckle pattern (a new patch of surface under the line)
 placement           one of ``placements`` pre-rendered gauge placements, uniform (offset in a
@@ -140,10 +143,12 @@ def _calibration(path: str):
 
 
 def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
-                noise_seed: int | None = None):
+                noise_seed: int | None = None, shots: int = 1):
     """``cal`` with the §4.4 view offsets measured with it on the reference placement
     (``placement_00``), whatever offsets ``cal`` held.  The reference image is noise-free, or
-    with ``noise_seed`` has realistic sensor noise and a speckle pattern drawn from it."""
+    with ``noise_seed`` has realistic sensor noise and a speckle pattern drawn from it; then
+    ``shots`` such images (the gauge turned between them: a new speckle pattern each) are
+    fitted jointly."""
     from types import SimpleNamespace
 
     from lts360.recon.compensation import joint_view_offsets
@@ -153,13 +158,16 @@ def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
 
     Y0, L0, _ = _placement(str(Path(renders) / "placement_00"))
     noisy = noise_seed is not None
-    ref, _, _ = sensor_image(load_rig(rig_name), SimpleNamespace(radiance_W_m2_sr=Y0,
-                                                                 laser_W_m2_sr=L0),
-                             noise="realistic" if noisy else "none",
-                             seed=int(noise_seed) if noisy else 0, speckle=noisy,
-                             speckle_seed=int(noise_seed) + 1 if noisy else None)
+    rig = load_rig(rig_name)
     cal = dataclasses.replace(cal, view_offsets_mm={})
-    offsets = joint_view_offsets(inverse_triangulate(ref, cal, _grid(theta_step_deg)))
+    results = []
+    for j in range(int(shots) if noisy else 1):  # noise-free shots would all be the same
+        s = int(noise_seed) + 2 * j if noisy else 0
+        ref, _, _ = sensor_image(rig, SimpleNamespace(radiance_W_m2_sr=Y0, laser_W_m2_sr=L0),
+                                 noise="realistic" if noisy else "none", seed=s, speckle=noisy,
+                                 speckle_seed=s + 1 if noisy else None)
+        results.append(inverse_triangulate(ref, cal, _grid(theta_step_deg)))
+    offsets = joint_view_offsets(results)
     return dataclasses.replace(cal, view_offsets_mm=offsets)
 
 
@@ -232,7 +240,8 @@ def mc_trial(trial: Trial) -> TrialOutput:
         if "calibration" in vary:
             cal = sample_calibration(cal, np.random.default_rng(seeds[2]))
         cal = _compensate(cal, p["renders"], p["rig"], step,
-                          noise_seed=int(seeds[4]) if "compensation" in vary else None)
+                          noise_seed=int(seeds[4]) if "compensation" in vary else None,
+                          shots=int(p.get("compensation_shots", 1)))
     else:  # the same procedure, once
         cal = _nominal_calibration(p["calibration"], p["renders"], p["rig"], step)
     out = inverse_triangulate(image, cal, _grid(step), compensate=bool(cal.view_offsets_mm))
@@ -305,17 +314,22 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
                           placements: int = 8, seed: int = 0, rig: str = "paper", spp: int = 16,
                           theta_step_deg: float = 0.5, workers: int | None = None,
                           dask_address: str | None = None, compensate: bool = True,
-                          say=print) -> dict:
+                          compensation_shots: int = 1, say=print) -> dict:
     """Run the study (see the module docstring); returns the summary written to summary.json.
 
     ``compensate=False``: every trial measures without the §4.4 compensation (the view
-    offsets of ``calibration`` are ignored) and the ``compensation`` input is left out."""
+    offsets of ``calibration`` are ignored) and the ``compensation`` input is left out.
+    ``compensation_shots``: images of the reference placement each compensation is fitted
+    to (jointly, :func:`lts360.recon.compensation.joint_view_offsets`); the ``compensation``
+    input's spread falls as ``1/√shots``."""
+    if not 1 <= int(compensation_shots) <= 100:
+        raise ValueError(f"compensation_shots must be in [1, 100], got {compensation_shots}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     renders = _render_placements(out, placements, rig=rig, seed=seed, spp=spp, say=say)
     base = {"calibration": str(Path(calibration).resolve()), "renders": str(renders.resolve()),
             "placements": placements, "rig": rig, "theta_step_deg": theta_step_deg,
-            "compensate": bool(compensate)}
+            "compensate": bool(compensate), "compensation_shots": int(compensation_shots)}
     if workers is None and dask_address is None:
         workers = 2
     kw = dict(seed=seed, workers=workers, dask_address=dask_address, say=say)
