@@ -225,7 +225,9 @@ def robust_refine_mirror(observations, board: BoardGeometry, K, dist, *,
     the images kept.
 
     Measured on rendered images (64 spp): most images fit to 0.035–0.06 px; obliquely seen
-    boards reach 0.1–0.3 px and moved the plane by up to 1 mm on their own.
+    boards reach 0.1–0.3 px and moved the plane by up to 1 mm on their own.  An image that
+    loses a quarter of its corners to the outlier rule is discarded too: its RMS over the
+    corners left would not show it (a wrongly matched virtual board loses all of them).
     """
     keep = np.ones(len(observations), bool)
     est = None
@@ -236,7 +238,9 @@ def robust_refine_mirror(observations, board: BoardGeometry, K, dist, *,
                              f"outliers, need {min_images}")
         est = refine_mirror(obs, board, K, dist)
         rms = per_image_rms(est, len(obs))
+        kept = np.asarray(est.corner_kept, bool).reshape(len(obs), -1).mean(axis=1)
         bad = (rms > max_image_rms_px) | (rms > outlier_factor * np.median(rms))
+        bad |= kept < 0.75  # a quarter of its corners wrong: the image is (a wrong match)
         if not bad.any():
             break
         idx = np.flatnonzero(keep)
@@ -290,7 +294,7 @@ def refine_mirror(observations, board: BoardGeometry, K, dist,
 
     weight = np.ones(2 * len(observations) * len(obj))  # per corner: real, virtual per image
     sol = None
-    for _ in range(2):
+    for _ in range(6):  # until the corners left out no longer change
         w2 = np.repeat(weight, 2)
         sol = least_squares(lambda x: residuals(x) * w2, x0 if sol is None else sol.x,
                             method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
