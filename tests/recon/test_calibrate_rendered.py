@@ -70,6 +70,10 @@ def test_outputs_are_written_and_loadable(calibrated):
     unc = cal.uncertainty
     assert np.asarray(unc["mirrors"]["left"]["cov_abd"]).shape == (3, 3)
     assert unc["laser_plane"]["std_offset_mm"] > 0
+    cam = unc["camera"]
+    assert cam["std_method"] == "jackknife over boards"
+    assert np.asarray(cam["cov"]).shape == (9, 9) and cam["cov_names"][:4] == ["fx", "fy", "cx", "cy"]
+    assert cam["std"]["fx"] > 0 and cam["std_opencv"]["fx"] > 0
 
 
 def test_estimates_are_near_the_truth(calibrated):

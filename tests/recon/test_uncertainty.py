@@ -103,3 +103,24 @@ def test_sample_calibration_draws_with_the_stored_spread_and_stays_valid():
         assert abs(n @ c.T_cam_meas[:3, 3] - dd) < 1e-9
         corners = c.mirror("left").corners_mm
         assert np.abs(corners @ c.mirror("left").n - c.mirror("left").d_mm).max() < 1e-9
+
+
+def test_a_camera_covariance_is_drawn_jointly():
+    """``camera.cov`` (the jackknife's) wins over ``camera.std``: fx and fy move together."""
+    import dataclasses
+
+    cal = _true_calibration()
+    cov = np.array([[0.25, 0.24, 0.0], [0.24, 0.25, 0.0], [0.0, 0.0, 0.04]])  # fx, fy, cy
+    cal = dataclasses.replace(cal, uncertainty={"camera": {
+        "std": {"fx": 5.0}, "cov": cov.tolist(), "cov_names": ["fx", "fy", "cy"]}})
+    rng = np.random.default_rng(3)
+    draws = [sample_calibration(cal, rng) for _ in range(600)]
+    x = np.array([[c.K[0, 0], c.K[1, 1], c.K[1, 2], c.K[0, 2]] for c in draws])
+    assert x[:, 0].std() == pytest.approx(0.5, rel=0.12)
+    assert np.corrcoef(x[:, 0], x[:, 1])[0, 1] == pytest.approx(0.96, abs=0.02)
+    assert x[:, 2].std() == pytest.approx(0.2, rel=0.12)
+    assert np.all(x[:, 3] == cal.K[0, 2])  # cx not in the covariance: fixed
+    bad = dataclasses.replace(cal, uncertainty={"camera": {"cov": np.eye(2).tolist(),
+                                                           "cov_names": ["fx", "fy", "cy"]}})
+    with pytest.raises(ValueError, match="cov must be"):
+        sample_calibration(bad, rng)

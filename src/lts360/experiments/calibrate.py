@@ -76,7 +76,9 @@ def calibration_report(result: RigCalibrationResult) -> dict:
     unc = result.calibration.uncertainty
     rep = {"camera": {"rms_px": cam.rms_px, "images_used": list(result.camera_images),
                       "per_image_rms_px": [float(v) for v in cam.per_image_rms_px],
-                      "std": unc["camera"]["std"]},
+                      "std": unc["camera"]["std"],
+                      "std_method": unc["camera"].get("std_method", "opencv"),
+                      "std_opencv": unc["camera"].get("std_opencv", unc["camera"]["std"])},
            "mirrors": {}, "skipped": result.skipped}
     for name, (names, _) in result.mirror_observations.items():
         lsq, mid = result.mirror_lsq[name], result.mirror_midpoint[name]
@@ -252,7 +254,8 @@ def format_report(report: dict) -> str:
     c = report["camera"]
     lines.append(f"camera: {len(c['images_used'])} images, reprojection RMS {c['rms_px']:.4f} px, "
                  f"σ(fx) {c['std']['fx']:.3f} px, σ(cx, cy) {c['std']['cx']:.3f}, "
-                 f"{c['std']['cy']:.3f} px")
+                 f"{c['std']['cy']:.3f} px ({c.get('std_method', 'opencv')}; OpenCV's σ(cx) "
+                 f"{c.get('std_opencv', c['std'])['cx']:.3f} px)")
     for name, m in report["mirrors"].items():
         lines.append(f"mirror {name}: {len(m['images'])} images, LSQ RMS {m['lsq_rms_px']:.4f} px, "
                      f"σ(normal) {m['std_angle_deg']:.4f}°, σ(offset) {1e3 * m['std_offset_mm']:.1f} µm;"

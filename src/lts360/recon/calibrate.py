@@ -262,11 +262,16 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
     if not obs:
         raise ValueError("mirror calibration: no image shows a board directly and in a mirror")
     mids, lsqs, planes = {}, {}, {}
+    rejected: set[str] = set()  # real/virtual pairs the mirror fit threw out
     for name in list(obs):
         lsq, keep = robust_refine_mirror(obs[name], board, K, dist)
         for nm, k in zip(obs_names[name], keep):
             if not k:
-                skipped[nm] = "mirror fit: large reprojection error, discarded"
+                rejected.add(nm)
+                skipped[nm] = ("mirror fit: large reprojection error, discarded"
+                               if nm not in laser_obs else "mirror fit: large reprojection "
+                               "error, not used for the mirror; its laser line posed from "
+                               "the direct view alone")
         obs[name] = [o for o, k in zip(obs[name], keep) if k]
         obs_names[name] = [n for n, k in zip(obs_names[name], keep) if k]
         ob_list = obs[name]
@@ -294,7 +299,7 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
             # Seen in a calibrated mirror too: the pose from both views (stereo with the
             # mirror's virtual camera), else from the direct view alone.
             ob = laser_obs.get(s["name"])
-            if ob is not None:
+            if ob is not None and s["name"] not in rejected:  # not a wrongly matched pair
                 lsq = planes[name][0]
                 pose = board_pose_in_mirror(ob.real_px, ob.virtual_px, board, K, dist,
                                             lsq.normal, lsq.d_mm)
@@ -305,7 +310,7 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
                                                  image_board, board, K, dist, pose=pose,
                                                  pose_views=views)
         except ValueError as exc:
-            skipped[s["name"]] = str(exc)
+            skipped[s["name"]] = "; ".join(filter(None, (skipped.get(s["name"]), str(exc))))
     say(f"laser plane: {len(lines)} poses")
     laser = fit_laser_plane(list(lines.values()))
     laser_groups = []
@@ -329,9 +334,15 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
             "left": MirrorPlane("left", l.n, l.d_mm, _mirror_corners(l, r, T, images.design)),
             "right": MirrorPlane("right", r.n, r.d_mm, _mirror_corners(r, l, T, images.design)),
         }
-    std = dict(zip(CAMERA_STD_NAMES, (float(v) for v in cam.std_intrinsics[:9])))
+    std_cv = dict(zip(CAMERA_STD_NAMES, (float(v) for v in cam.std_intrinsics[:9])))
+    camera_unc = {"std": std_cv, "std_method": "opencv", "std_opencv": std_cv,
+                  "rms_px": cam.rms_px, "n_images": int(cam.used.sum())}
+    if cam.cov_jackknife is not None:  # boards, not corners, are the independent units
+        camera_unc.update(std=dict(zip(CAMERA_STD_NAMES, (float(v) for v in cam.std_jackknife))),
+                          std_method="jackknife over boards", cov=cam.cov_jackknife.tolist(),
+                          cov_names=list(CAMERA_STD_NAMES))
     unc = {
-        "camera": {"std": std, "rms_px": cam.rms_px, "n_images": int(cam.used.sum())},
+        "camera": camera_unc,
         "mirrors": {name: _plane_unc(lsq.normal, lsq.d_mm, _lsq_abd_cov(lsq), g)
                     for name, (lsq, g) in planes.items()},
         "laser_plane": _plane_unc(laser.normal, laser.d_mm, laser.covariance, laser_groups),

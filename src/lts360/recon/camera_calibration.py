@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["BoardGeometry", "CameraCalibration", "detect_corners", "calibrate_camera",
-           "corner_outlier_limit"]
+           "corner_outlier_limit", "intrinsics_jackknife", "INTRINSIC_NAMES"]
 
 
 @dataclass(frozen=True)
@@ -66,7 +66,14 @@ class CameraCalibration:
     used : (n,) bool
         Which input images were detected and kept.
     std_intrinsics : (18,) float
-        OpenCV's standard deviations (fx, fy, cx, cy, k1, k2, p1, p2, k3, …).
+        OpenCV's standard deviations (fx, fy, cx, cy, k1, k2, p1, p2, k3, …).  They assume
+        independent corner errors; corners of one board share much of theirs (its
+        homography), so these understate the real spread (see ``cov_jackknife``).
+    cov_jackknife : (9, 9) float or None
+        Delete-one-board jackknife covariance of ``(fx, fy, cx, cy, k1, k2, p1, p2, k3)``
+        (:func:`intrinsics_jackknife`): the spread of the intrinsics when the boards, not
+        the corners, are the independent units.  ``None`` with fewer than 3 boards; zero
+        rows and columns for fixed parameters.
     rvecs, tvecs : list of (3,) float
         Board poses of the kept images (board → camera).
     corners : list of (n, 2) float
@@ -87,6 +94,68 @@ class CameraCalibration:
     tvecs: list = field(default_factory=list)
     corners: list = field(default_factory=list)
     corner_kept: list = field(default_factory=list)
+    cov_jackknife: np.ndarray | None = None
+
+    @property
+    def std_jackknife(self) -> np.ndarray | None:
+        """(9,) square roots of the diagonal of ``cov_jackknife`` (or ``None``)."""
+        return None if self.cov_jackknife is None else np.sqrt(np.diag(self.cov_jackknife))
+
+
+#: Order of the intrinsics in ``std_intrinsics[:9]`` and ``cov_jackknife``.
+INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
+
+
+def _intrinsic_vector(K: np.ndarray, dist) -> np.ndarray:
+    d = np.zeros(5)
+    flat = np.ravel(dist)[:5]
+    d[:len(flat)] = flat
+    return np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2], *d])
+
+
+def intrinsics_jackknife(object_points, image_points, image_size, K, dist, *, flags: int = 0,
+                         criteria=None) -> np.ndarray:
+    """Delete-one-board jackknife covariance of the intrinsics ``INTRINSIC_NAMES``.
+
+    Zhang's calibration is repeated with each board left out in turn, started from ``K,
+    dist`` (the all-board solution, ``CALIB_USE_INTRINSIC_GUESS``) with the same ``flags``;
+    the covariance is ``(m − 1)/m · Σ (θ_i − θ̄)(θ_i − θ̄)ᵀ`` over the ``m`` estimates.  Unlike
+    OpenCV's ``stdDeviationsIntrinsics`` it does not assume that a board's corners err
+    independently: an error shared by a board (a wrong homography) moves the leave-one-out
+    estimates as much as it moves the calibration.
+
+    Parameters
+    ----------
+    object_points, image_points : sequences of (n_i, 3) / (n_i, 2) float, one per board
+    image_size : (int, int)
+        ``(width, height)``.
+    K, dist : the calibration from all boards
+
+    Raises
+    ------
+    ValueError
+        Fewer than 3 boards.
+    """
+    import cv2
+
+    from lts360.recon.uncertainty import jackknife_covariance
+
+    m = len(object_points)
+    if m < 3 or len(image_points) != m:
+        raise ValueError(f"intrinsics_jackknife: need at least 3 boards with image points, "
+                         f"got {m} and {len(image_points)}")
+    if criteria is None:
+        criteria = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-12)
+    est = []
+    for i in range(m):
+        objs = [np.asarray(o, np.float32) for j, o in enumerate(object_points) if j != i]
+        pts = [np.asarray(p, np.float32) for j, p in enumerate(image_points) if j != i]
+        _, K_i, d_i, _, _ = cv2.calibrateCamera(
+            objs, pts, tuple(int(v) for v in image_size), np.array(K, float).copy(),
+            np.array(dist, float).reshape(-1, 1).copy(),
+            flags=flags | cv2.CALIB_USE_INTRINSIC_GUESS, criteria=criteria)
+        est.append(_intrinsic_vector(K_i, d_i))
+    return jackknife_covariance(np.array(est))
 
 
 def corner_outlier_limit(errors_px: np.ndarray, floor_px: float) -> float:
@@ -185,7 +254,8 @@ def calibrate_camera(images, board: BoardGeometry, *, max_image_rms_px: float = 
                      outlier_factor: float = 3.0, fix_k3: bool = True,
                      zero_tangent: bool = False, min_images: int = 4,
                      corner_outlier_px: float = 0.25, board_model_rounds: int = 0,
-                     model_outlier_px: float = 0.05, progress=None) -> CameraCalibration:
+                     model_outlier_px: float = 0.05, jackknife: bool = True,
+                     progress=None) -> CameraCalibration:
     """Zhang calibration of the camera from images of a chessboard.
 
     ``fix_k3`` keeps k3 = 0 and ``zero_tangent`` keeps p1 = p2 = 0 (OpenCV's
@@ -207,6 +277,9 @@ def calibrate_camera(images, board: BoardGeometry, *, max_image_rms_px: float = 
     (the model's corners are ~5 times more precise).  Slow (LM per corner) but every pixel
     of the squares counts, not only those next to the corner.  See STUDIES.md for what it
     changes.  ``progress(i, n)`` is called after each board.
+
+    ``jackknife`` (default): also the delete-one-board covariance of the intrinsics
+    (:func:`intrinsics_jackknife`, one more Zhang solution per kept board).
 
     Raises
     ------
@@ -264,10 +337,12 @@ def calibrate_camera(images, board: BoardGeometry, *, max_image_rms_px: float = 
             used[idx[bad]] = False
     corners = [found[i] for i in idx]
     kept = [keep[i].copy() for i in idx]
+    cov_jk = (intrinsics_jackknife(objs, pts, (w, h), K, dist, flags=flags, criteria=crit)
+              if jackknife and len(idx) >= 3 else None)
     return CameraCalibration(K=K, dist=dist.ravel()[:5], image_size=(w, h), rms_px=float(rms),
                              per_image_rms_px=per_view, used=used, std_intrinsics=std_i.ravel(),
                              rvecs=[r.ravel() for r in rvecs], tvecs=[t.ravel() for t in tvecs],
-                             corners=corners, corner_kept=kept)
+                             corners=corners, corner_kept=kept, cov_jackknife=cov_jk)
 
 
 def _board_model_corners(images, board, K, dist, rvecs, tvecs, progress=None) -> list:

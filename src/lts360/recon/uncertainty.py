@@ -7,13 +7,19 @@ means the same thing when it is read back).  ``a`` and ``b`` are small angles in
 
 The layout of ``Calibration.uncertainty`` (JSON):
 
-* ``camera.std`` — standard deviations of ``fx fy cx cy`` (px) and ``k1 k2 p1 p2 k3``
-  (OpenCV's ``stdDeviationsIntrinsics``);
+* ``camera.std`` — standard deviations of ``fx fy cx cy`` (px) and ``k1 k2 p1 p2 k3``;
+  ``camera.std_method`` says whose: ``"jackknife over boards"``
+  (:func:`lts360.recon.camera_calibration.intrinsics_jackknife`) or ``"opencv"`` (its
+  ``stdDeviationsIntrinsics``, which assume independent corner errors and understate the
+  spread when a board's corners share an error); ``camera.std_opencv`` keeps OpenCV's;
+* ``camera.cov`` with ``camera.cov_names`` (optional) — the covariance of those parameters
+  (the jackknife's): drawn jointly when present (fx and fy, for one, move together);
 * ``mirrors.<name>.cov_abd`` and ``laser_plane.cov_abd`` — 3×3 covariances of ``(a, b, δ)``
   (rad, rad, mm).
 
-:func:`sample_calibration` draws a calibration from these (independent components, each
-Gaussian) — the calibration input of the Monte Carlo study (GUM-S1).
+:func:`sample_calibration` draws a calibration from these (the camera, each mirror and the
+laser plane independently, each Gaussian) — the calibration input of the Monte Carlo study
+(GUM-S1).
 """
 
 from __future__ import annotations
@@ -79,6 +85,23 @@ def plane_offset_abd(n_ref, d_ref: float, n, d_mm: float) -> np.ndarray:
     return np.array([n @ e1, n @ e2, d_mm - d_ref])
 
 
+def _camera_draw(camera: dict, rng: np.random.Generator) -> dict[str, float]:
+    """Offsets of the intrinsics: jointly from ``cov`` when given, else from ``std``."""
+    draw = dict.fromkeys(CAMERA_STD_NAMES, 0.0)
+    cov, names = camera.get("cov"), camera.get("cov_names")
+    if cov is not None and names is not None:
+        cov = np.asarray(cov, dtype=float)
+        if cov.shape != (len(names), len(names)) or not set(names) <= set(CAMERA_STD_NAMES):
+            raise ValueError(f"uncertainty.camera: cov must be {len(names)}×{len(names)} over "
+                             f"{list(CAMERA_STD_NAMES)}, got {cov.shape} over {list(names)}")
+        draw.update(zip(names, rng.multivariate_normal(np.zeros(len(names)), cov,
+                                                       method="eigh")))
+        return draw
+    std = camera.get("std") or {}
+    draw.update({k: rng.normal(0.0, float(std[k])) for k in CAMERA_STD_NAMES if k in std})
+    return draw
+
+
 def sample_calibration(cal, rng: np.random.Generator):
     """A calibration drawn from ``cal.uncertainty`` (components absent there stay fixed).
 
@@ -89,8 +112,7 @@ def sample_calibration(cal, rng: np.random.Generator):
 
     u = cal.uncertainty or {}
     K, dist = cal.K.copy(), cal.dist.copy()
-    std = (u.get("camera") or {}).get("std") or {}
-    draw = {k: rng.normal(0.0, float(std[k])) if k in std else 0.0 for k in CAMERA_STD_NAMES}
+    draw = _camera_draw(u.get("camera") or {}, rng)
     K[0, 0] += draw["fx"]
     K[1, 1] += draw["fy"]
     K[0, 2] += draw["cx"]
