@@ -88,3 +88,37 @@ def test_bad_rig_fields_fail_with_the_field_name(table, key, value, match):
 def test_unknown_rig_source():
     with pytest.raises(RigError, match="neither a preset"):
         load_rig("/nonexistent/rig.toml")
+
+
+def test_paper_f8_is_the_paper_rig_stopped_down(paper):
+    f8 = load_rig("paper-f8")
+    assert f8.name == "paper-f8" and f8.camera.f_number == 8.0
+    assert f8.camera.aperture_diameter_mm == pytest.approx(paper.camera.aperture_diameter_mm * 2.8 / 8)
+    assert np.array_equal(f8.camera.K, paper.camera.K) and np.array_equal(f8.camera.R, paper.camera.R)
+    assert f8.camera.focus_distance_mm == paper.camera.focus_distance_mm
+    assert f8.laser.waist_um == paper.laser.waist_um and f8.sensor == paper.sensor
+    for a, b in zip(f8.mirrors, paper.mirrors):
+        assert np.array_equal(a.corners_mm, b.corners_mm)
+
+
+def test_a_rig_file_with_a_base(tmp_path):
+    (tmp_path / "wide.toml").write_text('base = "paper"\n[design]\nalpha_deg = 35.0\n'
+                                        '[laser]\nwaist_um = 200.0\nrayleigh_range_mm = 150.0\n')
+    (tmp_path / "wide-f4.toml").write_text('name = "mine"\nbase = "wide.toml"\n'
+                                           '[camera]\nf_number = 4.0\n')
+    rig = load_rig(tmp_path / "wide-f4.toml")  # a base relative to the file, two levels
+    paper = load_rig("paper")
+    assert rig.name == "mine"
+    assert rig.design.alpha_deg == 35.0 and rig.design.beta_deg == paper.design.beta_deg
+    assert rig.laser.waist_um == 200.0 and rig.laser.power_mW == paper.laser.power_mW
+    assert rig.camera.f_number == 4.0 and rig.camera.pixel_pitch_um == paper.camera.pixel_pitch_um
+    assert load_rig(tmp_path / "wide.toml").name == "wide"  # the file's own name, not the base's
+    (tmp_path / "loop.toml").write_text('base = "loop.toml"\n')
+    with pytest.raises(RigError, match="bases deep"):
+        load_rig(tmp_path / "loop.toml")
+    (tmp_path / "typo.toml").write_text('base = "paper"\n[camera]\nf_numbr = 4.0\n')
+    with pytest.raises(RigError, match="f_numbr"):
+        load_rig(tmp_path / "typo.toml")
+    (tmp_path / "nobase.toml").write_text('base = "nothere.toml"\n')
+    with pytest.raises(RigError, match="neither a preset"):
+        load_rig(tmp_path / "nobase.toml")

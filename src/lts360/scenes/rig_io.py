@@ -3,6 +3,11 @@
 A rig file has a top-level ``name`` and the tables ``[design]`` (:class:`RigDesign`),
 ``[camera]``, ``[laser]``, ``[stage]`` (component fields other than the pose, which
 :func:`build_rig` derives from the design) and ``[sensor]`` (EMVA 1288 parameters).  Unknown tables or keys are errors.
+
+A top-level ``base`` (a preset name, or a TOML file relative to this one) makes the file a
+variant of another rig: its tables start from the base's and the keys given replace the
+base's, key by key (``base = "paper"`` with ``[camera] f_number = 8.0`` is the paper rig
+stopped down).  Bases may have bases, up to :data:`MAX_BASE_DEPTH` deep.
 """
 
 from __future__ import annotations
@@ -17,7 +22,9 @@ from lts360.scenes.sensor import SensorModel
 
 __all__ = ["PRESETS", "load_rig", "rig_from_dict", "rig_to_toml"]
 
-PRESETS = ("paper",)
+PRESETS = ("paper", "paper-f8")
+#: How many ``base`` links a rig file may follow.
+MAX_BASE_DEPTH = 8
 
 _DERIVED = {"camera": {"R", "t_mm"}, "laser": {"origin_mm", "direction", "normal"}}
 _TABLES = {"design": RigDesign, "camera": Camera, "laser": LaserSheet, "stage": Stage,
@@ -52,24 +59,48 @@ def rig_from_dict(data: dict, *, default_name: str = "custom") -> Rig:
                      stage=data.get("stage"), sensor=data.get("sensor"), name=name)
 
 
-def load_rig(source: str | Path = "paper") -> Rig:
-    """Load a preset by name (``"paper"``) or a TOML file by path."""
-    text: str
-    source_str = str(source)
-    if source_str in PRESETS:
-        text = resources.files("lts360.scenes").joinpath("presets", f"{source_str}.toml").read_text()
-        default_name = source_str
-    else:
-        path = Path(source_str)
-        if not path.is_file():
-            raise RigError(f"rig: {source_str!r} is neither a preset ({', '.join(PRESETS)}) "
-                           "nor a readable TOML file")
-        text = path.read_text()
-        default_name = path.stem
+def _rig_text(source: str) -> tuple[str, str, Path | None]:
+    """TOML text, default name and (for a file) its folder."""
+    if source in PRESETS:
+        text = resources.files("lts360.scenes").joinpath("presets", f"{source}.toml").read_text()
+        return text, source, None
+    path = Path(source)
+    if not path.is_file():
+        raise RigError(f"rig: {source!r} is neither a preset ({', '.join(PRESETS)}) "
+                       "nor a readable TOML file")
+    return path.read_text(), path.stem, path.parent
+
+
+def _rig_data(source: str, depth: int = 0) -> tuple[dict, str]:
+    """The parsed TOML of ``source`` with its ``base`` chain merged in."""
+    text, default_name, folder = _rig_text(source)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise RigError(f"rig file {source_str}: invalid TOML ({exc})") from None
+        raise RigError(f"rig file {source}: invalid TOML ({exc})") from None
+    base = data.pop("base", None)
+    if base is None:
+        return data, default_name
+    if not isinstance(base, str) or not base:
+        raise RigError(f"rig file {source}: base must be a preset name or a file")
+    if depth >= MAX_BASE_DEPTH:
+        raise RigError(f"rig file {source}: more than {MAX_BASE_DEPTH} bases deep "
+                       "(a base refers back to itself?)")
+    if base not in PRESETS and folder is not None:
+        base = str(folder / base)
+    merged, _ = _rig_data(base, depth + 1)
+    merged.pop("name", None)
+    for key, value in data.items():
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):
+            merged[key] = {**merged[key], **value}
+        else:
+            merged[key] = value
+    return merged, default_name
+
+
+def load_rig(source: str | Path = "paper") -> Rig:
+    """Load a preset by name (``"paper"``, ``"paper-f8"``) or a TOML file by path."""
+    data, default_name = _rig_data(str(source))
     return rig_from_dict(data, default_name=default_name)
 
 
