@@ -304,6 +304,12 @@ def _study_common(args) -> dict:
     return {"seed": args.seed, "dask_address": args.dask}
 
 
+def _study_rig(rig: str) -> None:
+    from lts360.scenes.rig_io import load_rig
+
+    load_rig(rig)  # fail early on a bad rig
+
+
 def _check_shots(shots: int) -> None:
     if not 1 <= shots <= 100:
         raise UsageError(f"--compensation-shots: must be in [1, 100], got {shots}")
@@ -317,9 +323,10 @@ def _cmd_study_plug_gauge(args) -> int:
         raise UsageError(f"--trials: must be in [1, 10000], got {args.trials}")
     _check_shots(args.compensation_shots)
     _optional_file(args.calibration, "--calibration")
+    _study_rig(args.rig)
     _set_variant(args.variant)
     table = run_plug_gauge_study(args.out, trials=args.trials, calibration=args.calibration,
-                                 noise=args.noise, spp=args.spp,
+                                 noise=args.noise, spp=args.spp, rig=args.rig,
                                  compensation_shots=args.compensation_shots,
                                  workers=args.workers or 1, **common)
     print(format_gauge_table(table))
@@ -342,12 +349,14 @@ def _cmd_study_monte_carlo(args) -> int:
         raise UsageError(f"--digits: must be in [1, 4], got {args.digits}")
     _check_shots(args.compensation_shots)
     _optional_file(args.calibration, "--calibration")
+    _study_rig(args.rig)
     _set_variant(args.variant)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     # The study compensates itself (every trial alike, at its reference placement).
-    cal = ensure_calibration(out, args.calibration, seed=args.seed, compensate=False)
-    summary = run_monte_carlo_study(out, calibration=cal, trials=args.trials,
+    cal = ensure_calibration(out, args.calibration, rig=args.rig, seed=args.seed,
+                             compensate=False)
+    summary = run_monte_carlo_study(out, calibration=cal, trials=args.trials, rig=args.rig,
                                     compensate=not args.no_compensate,
                                     compensation_shots=args.compensation_shots,
                                     adaptive=args.adaptive, batch=args.batch, n_dig=args.digits,
@@ -559,6 +568,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "from rendered images into OUT/calibration/)")
     q.add_argument("--noise", choices=("none", "realistic"), default="realistic")
     q.add_argument("--spp", type=int, default=16)
+    q.add_argument("--rig", default="paper", help="rig to render: 'paper' or a TOML file (the "
+                   "one the calibration is of)")
     q.add_argument("--compensation-shots", type=int, default=1, metavar="K",
                    help="images of the gauge (turned between them) the §4.4 compensation is "
                    "fitted to (default 1, as the paper)")
@@ -580,6 +591,8 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--compensation-shots", type=int, default=1, metavar="K",
                    help="images of the reference placement each §4.4 compensation is fitted "
                    "to (default 1, as the paper)")
+    q.add_argument("--rig", default="paper", help="rig to render: 'paper' or a TOML file (the "
+                   "one the calibration is of)")
     q.set_defaults(func=_cmd_study_monte_carlo)
 
     q = study_parser("examples", "paper §4.6: the eight objects scanned with the paper's "

@@ -32,6 +32,7 @@ def run(*args):
     (("study", "monte-carlo", "--out", "s", "--trials", "1"), "--trials"),
     (("study", "monte-carlo", "--out", "s", "--compensation-shots", "0"), "--compensation-shots"),
     (("study", "plug-gauge", "--out", "s", "--compensation-shots", "101"), "--compensation-shots"),
+    (("study", "plug-gauge", "--out", "s", "--rig", "no-such-rig.toml"), "no-such-rig.toml"),
     (("study", "examples", "--out", "s", "--objects", "teapot"), "teapot"),
     (("study", "algorithms", "--out", "s", "--workers", "2", "--dask", "tcp://x:1"), "--dask"),
     (("study", "nonsense", "--out", "s"), "nonsense"),
