@@ -168,6 +168,9 @@ def _cmd_measure(args) -> int:
         raise UsageError(f"--radius-mm/--band-mm: need 0 < band < radius, got "
                          f"{args.radius_mm}, {args.band_mm}")
     cal = load_calibration(args.calibration)
+    if args.compensate and not any(np.any(v) for v in cal.view_offsets_mm.values()):
+        raise UsageError(f"--compensate: {args.calibration} has no view offsets (paper §4.4); "
+                         f"make them with `lts360 compensate`")
     grid = CylGrid.from_ranges((args.radius_mm - args.band_mm, args.radius_mm + args.band_mm),
                                theta_step_deg=args.theta_step_deg, r_step_mm=args.r_step_mm)
     sections = collect_sections(args.inputs, pitch_mm=args.pitch_mm)
@@ -185,6 +188,36 @@ def _cmd_measure(args) -> int:
     what = f"peak {args.peak}" if args.method == "inverse" else "classic (Steger 2-D)"
     print(f"{len(sections)} section(s), grid {grid.n_theta} θ × {grid.n_r} r, {what}: "
           f"{int(valid.sum())} valid points of {len(cloud)} θ samples in {dt:.2f} s -> {out}")
+    return 0
+
+
+def _cmd_compensate(args) -> int:
+    import dataclasses
+
+    from lts360.recon.calibration import load_calibration, save_calibration
+    from lts360.recon.compensation import joint_view_offsets
+    from lts360.recon.grid import CylGrid
+    from lts360.recon.inverse import inverse_triangulate
+    from lts360.recon.measure import collect_sections, read_image
+
+    if not args.radius_mm > 0 or not args.band_mm > 0 or args.band_mm >= args.radius_mm:
+        raise UsageError(f"--radius-mm/--band-mm: need 0 < band < radius, got "
+                         f"{args.radius_mm}, {args.band_mm}")
+    out = Path(args.out)
+    if not out.parent.exists():
+        raise UsageError(f"--out: directory {str(out.parent)!r} does not exist")
+    cal = load_calibration(args.calibration)
+    grid = CylGrid.from_ranges((args.radius_mm - args.band_mm, args.radius_mm + args.band_mm),
+                               theta_step_deg=args.theta_step_deg, r_step_mm=args.r_step_mm)
+    sections = collect_sections(args.inputs, pitch_mm=0.0)
+    results = [inverse_triangulate(read_image(s.image_path), cal, grid, peak=args.peak)
+               for s in sections]
+    # The mirror views are moved onto the direct one, as in the paper.
+    offsets = joint_view_offsets(results)
+    save_calibration(out, dataclasses.replace(cal, view_offsets_mm=offsets))
+    print(f"§4.4 offsets from {len(results)} reference shot(s), one circle each, the views "
+          f"shared: " + ", ".join(f"{k} ({1e3 * v[0]:+.1f}, {1e3 * v[1]:+.1f}) µm"
+                                  for k, v in sorted(offsets.items())) + f" -> {out}")
     return 0
 
 
@@ -506,6 +539,20 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--backend", choices=("auto", "numpy", "llvm", "cuda"), default="auto",
                    help="auto: the Dr.Jit kernel for the centroid, numpy otherwise")
     s.set_defaults(func=_cmd_measure)
+
+    s = sub.add_parser("compensate", help="residual compensation (paper §4.4): the mirror "
+                       "views' offsets from images of a round reference, into a calibration")
+    s.add_argument("inputs", nargs="+", help="frame directories, scan directories or image "
+                   "files of one round reference section (several: shots fitted together)")
+    s.add_argument("--calibration", required=True, help="calibration.json to compensate")
+    s.add_argument("--out", required=True, help="the compensated calibration.json")
+    s.add_argument("--peak", choices=("centroid", "gauss", "steger"), default="centroid")
+    s.add_argument("--theta-step-deg", type=float, default=0.1)
+    s.add_argument("--r-step-mm", type=float, default=0.005)
+    s.add_argument("--radius-mm", type=float, default=10.0,
+                   help="the reference's nominal radius (default 10)")
+    s.add_argument("--band-mm", type=float, default=1.0, help="radial search band ± (default 1)")
+    s.set_defaults(func=_cmd_compensate)
 
     s = sub.add_parser("score", help="score a measured cloud against the truth of rendered frames")
     s.add_argument("cloud", help="cloud.ply written by `lts360 measure`")

@@ -36,6 +36,9 @@ def run(*args):
     (("study", "examples", "--out", "s", "--objects", "teapot"), "teapot"),
     (("study", "algorithms", "--out", "s", "--workers", "2", "--dask", "tcp://x:1"), "--dask"),
     (("study", "nonsense", "--out", "s"), "nonsense"),
+    (("compensate", "ref", "--calibration", "nope.json", "--out", "c.json"), "nope.json"),
+    (("compensate", "ref", "--calibration", "c.json", "--out", "c2.json", "--band-mm", "20"),
+     "--band-mm"),
 ])
 def test_usage_errors_are_one_line_exit_2(args, field, tmp_path):
     proc = subprocess.run([sys.executable, "-m", "lts360.cli", *args], capture_output=True,
@@ -48,8 +51,8 @@ def test_usage_errors_are_one_line_exit_2(args, field, tmp_path):
 
 
 def test_help_for_every_command():
-    for cmd in ("objects", "object", "rig", "render", "measure", "score", "calibrate", "study",
-                "demo"):
+    for cmd in ("objects", "object", "rig", "render", "measure", "compensate", "score",
+                "calibrate", "study", "demo"):
         proc = run(cmd, "--help")
         assert proc.returncode == 0 and "usage: lts360" in proc.stdout
     for study in ("plug-gauge", "examples", "design-space", "monte-carlo", "algorithms"):
