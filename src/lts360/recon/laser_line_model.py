@@ -20,7 +20,7 @@ direction ``φ``, offset ``c``, band width ``w``, amplitude ``A`` and gain ``g``
 least squares inside the printed squares.  Measured on the same shots: −10.5 to +2.6 µm.
 
 The gain: the band's brightness changes along the line (the fan's profile, the distance to
-the laser, the incidence on the tilted board; fitted g = −0.008…−0.019 /mm on the rendered
+the laser, the incidence on the tilted board; fitted g = −0.010…−0.017 /mm on the rendered
 shots, i.e. 10–25 % over the line).  A constant amplitude cannot follow it, and the misfit,
 lopsided where the band crosses black/white edges, turns the fitted line: on the twelve
 rendered laser shots of the f/2.8 and f/8 rigs (true board pose), the points tilted against
