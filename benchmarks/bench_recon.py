@@ -31,8 +31,8 @@ def main() -> None:
 
     mi.set_variant("llvm_ad_mono")
     from lts360.recon.calibration import calibration_from_frame_truth
-    from lts360.recon.grid import CylGrid
-    from lts360.recon.inverse import inverse_triangulate, plan_inverse
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
     from lts360.scenes.objects import build_object
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import simulate_frame
@@ -57,7 +57,7 @@ def main() -> None:
     t0 = time.perf_counter()
     inverse_triangulate(frame.image, cal, grid, peak="centroid")
     out["centroid_without_plan_s"] = time.perf_counter() - t0
-    from lts360.recon.fast import FastInverse
+    from lts360.recon.triangulation.fast import FastInverse
 
     t0 = time.perf_counter()
     fast = FastInverse(plan, backend="llvm")
@@ -73,7 +73,7 @@ def main() -> None:
         warm = times[1:]
         out[key] = {"first_s": times[0], "median_s": statistics.median(warm),
                     "min_s": min(warm), "max_s": max(warm)}
-    from lts360.recon.classic import classic_triangulate, view_regions
+    from lts360.recon.triangulation.classic import classic_triangulate, view_regions
 
     t0 = time.perf_counter()
     regions = view_regions(cal, grid)

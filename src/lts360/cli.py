@@ -160,9 +160,9 @@ def _progress(items, desc):
 
 def _cmd_measure(args) -> int:
     from lts360.recon.calibration import load_calibration
-    from lts360.recon.cloud import write_cloud
-    from lts360.recon.grid import CylGrid
-    from lts360.recon.measure import collect_sections, measure_sections
+    from lts360.recon.triangulation.cloud import write_cloud
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.measure import collect_sections, measure_sections
 
     if not args.radius_mm > 0 or not args.band_mm > 0 or args.band_mm >= args.radius_mm:
         raise UsageError(f"--radius-mm/--band-mm: need 0 < band < radius, got "
@@ -196,9 +196,9 @@ def _cmd_compensate(args) -> int:
 
     from lts360.recon.calibration import load_calibration, save_calibration
     from lts360.recon.compensation import joint_view_offsets
-    from lts360.recon.grid import CylGrid
-    from lts360.recon.inverse import inverse_triangulate
-    from lts360.recon.measure import collect_sections, read_image
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.inverse import inverse_triangulate
+    from lts360.recon.triangulation.measure import collect_sections, read_image
 
     if not args.radius_mm > 0 or not args.band_mm > 0 or args.band_mm >= args.radius_mm:
         raise UsageError(f"--radius-mm/--band-mm: need 0 < band < radius, got "
@@ -224,7 +224,7 @@ def _cmd_compensate(args) -> int:
 def _cmd_score(args) -> int:
 
     from lts360.experiments.score import load_rig_truth, load_truth, score_cloud
-    from lts360.recon.cloud import read_cloud
+    from lts360.recon.triangulation.cloud import read_cloud
     from lts360.simulator.io import write_json
 
     cloud = read_cloud(args.cloud)

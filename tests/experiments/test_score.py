@@ -5,7 +5,7 @@ import pytest
 import trimesh
 
 from lts360.experiments.score import score_cloud, signed_mesh_distance
-from lts360.recon.cloud import VIEW_CODES, Cloud, read_cloud, write_cloud
+from lts360.recon.triangulation.cloud import VIEW_CODES, Cloud, read_cloud, write_cloud
 from lts360.scenes.objects import build_object
 
 
@@ -75,7 +75,7 @@ def test_measurable_knows_which_side_of_the_gauge_each_view_sees():
     import json
 
     from lts360.experiments.score import measurable
-    from lts360.recon.cloud import VIEW_CODES
+    from lts360.recon.triangulation.cloud import VIEW_CODES
     from lts360.scenes.objects import build_object
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.io import rig_truth

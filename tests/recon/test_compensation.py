@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from lts360.recon.compensation import joint_view_offsets
-from lts360.recon.inverse import estimate_view_offsets
-from lts360.recon.peaks import Quality
+from lts360.recon.triangulation.inverse import estimate_view_offsets
+from lts360.recon.triangulation.peaks import Quality
 
 ARCS = {"direct": (-160.0, -20.0), "left": (85.0, 235.0), "right": (-55.0, 95.0)}
 

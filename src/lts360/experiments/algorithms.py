@@ -57,9 +57,9 @@ def _render(out: Path, name: str, *, rig: str, spp: int, seed: int) -> Path:
 def _setup(frame_dir: str, theta_step_deg: float, r_step_mm: float):
     """Radiance, truth object, calibration, grid and the per-method plans — once per process."""
     from lts360.recon.calibration import calibration_from_frame_truth
-    from lts360.recon.classic import view_regions
-    from lts360.recon.grid import CylGrid
-    from lts360.recon.inverse import plan_inverse
+    from lts360.recon.triangulation.classic import view_regions
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.inverse import plan_inverse
     from lts360.scenes.objects import build_object
     from lts360.simulator.io import read_exr
 
@@ -77,7 +77,7 @@ def _setup(frame_dir: str, theta_step_deg: float, r_step_mm: float):
     plan = plan_inverse(cal, grid, precompute=True)
     fast = None
     try:
-        from lts360.recon.fast import FastInverse
+        from lts360.recon.triangulation.fast import FastInverse
 
         fast = FastInverse(plan_inverse(cal, grid, precompute=False))
     except RuntimeError:
@@ -95,8 +95,8 @@ def algorithms_trial(trial: Trial) -> TrialOutput:
     """Measure one noisy image of one object with every method."""
     from types import SimpleNamespace
 
-    from lts360.recon.classic import classic_triangulate
-    from lts360.recon.inverse import inverse_triangulate
+    from lts360.recon.triangulation.classic import classic_triangulate
+    from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import sensor_image
 

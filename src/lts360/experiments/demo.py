@@ -33,9 +33,9 @@ def _measure_frames(root: Path, obj, echo) -> dict:
     """Inverse triangulation of the demo frames with the true calibration, then scoring."""
     from lts360.experiments.score import score_cloud
     from lts360.recon.calibration import load_calibration
-    from lts360.recon.cloud import write_cloud
-    from lts360.recon.grid import CylGrid
-    from lts360.recon.measure import collect_sections, measure_sections
+    from lts360.recon.triangulation.cloud import write_cloud
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.measure import collect_sections, measure_sections
     from lts360.simulator.io import write_json
 
     out = {}

@@ -370,10 +370,10 @@ def _draw_seeds(root: int, draws: int) -> tuple[int, list[int]]:
 
 def _measurer(cal, grid):
     """The per-image measurement, planned once: Dr.Jit's kernel, or the numpy reference."""
-    from lts360.recon.inverse import inverse_triangulate, plan_inverse
+    from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
 
     try:
-        from lts360.recon.fast import FastInverse
+        from lts360.recon.triangulation.fast import FastInverse
 
         return FastInverse(plan_inverse(cal, grid, precompute=False))
     except RuntimeError:  # no Dr.Jit LLVM backend: the precomputed numpy path
@@ -397,7 +397,7 @@ def _measure_draw(result, r_true_mm: float, centre_mm: np.ndarray) -> dict:
 
 def _monte_carlo(rig: Rig, *, draws: int, spp: int, scale: float, seed: int) -> dict:
     from lts360.recon.calibration import calibration_from_frame_truth
-    from lts360.recon.grid import CylGrid
+    from lts360.recon.triangulation.grid import CylGrid
     from lts360.scenes.objects import build_object
     from lts360.simulator.frame import sensor_image, simulate_frame
 
@@ -409,7 +409,7 @@ def _monte_carlo(rig: Rig, *, draws: int, spp: int, scale: float, seed: int) -> 
     frame = simulate_frame(rig, obj, spp=spp, seed=render_seed, noise="none", thin_lens=True,
                            scale=scale)
     seconds_render = time.perf_counter() - t0
-    # The truth as a file would hold it (plain JSON), as tests/recon/test_rendered_gauge.py does.
+    # The truth as a file would hold it (plain JSON), as tests/recon/triangulation/test_rendered_gauge.py does.
     truth = json.loads(json.dumps(frame.truth, default=lambda v: np.asarray(v).tolist()))
     cal = calibration_from_frame_truth(truth)
     grid = CylGrid.from_ranges((r_true - BAND_MM, r_true + BAND_MM),

@@ -49,10 +49,10 @@ def examples_trial(trial: Trial) -> TrialOutput:
 
     from lts360.experiments.score import score_cloud
     from lts360.recon.calibration import calibration_from_frame_truth, load_calibration
-    from lts360.recon.cloud import Cloud, write_cloud
-    from lts360.recon.grid import CylGrid
-    from lts360.recon.measure import result_to_cloud
-    from lts360.recon.inverse import inverse_triangulate, plan_inverse
+    from lts360.recon.triangulation.cloud import Cloud, write_cloud
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.measure import result_to_cloud
+    from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
     from lts360.scenes.objects import build_object
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import simulate_frame
@@ -82,7 +82,7 @@ def examples_trial(trial: Trial) -> TrialOutput:
                 calibration_from_frame_truth(json.loads(json.dumps(frame.truth,
                                                                    default=lambda v: v.tolist())))
             try:
-                from lts360.recon.fast import FastInverse
+                from lts360.recon.triangulation.fast import FastInverse
 
                 fast = FastInverse(plan_inverse(cal, grid, precompute=False))
             except RuntimeError:

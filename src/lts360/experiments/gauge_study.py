@@ -76,14 +76,14 @@ def _plan(cal_path, r_mm: float, band_mm: float, theta_step_deg: float, r_step_m
 def _cached_plan(cal_path: str, version: tuple, r_mm: float, band_mm: float,
                  theta_step_deg: float, r_step_mm: float):
     from lts360.recon.calibration import load_calibration
-    from lts360.recon.grid import CylGrid
-    from lts360.recon.inverse import plan_inverse
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.inverse import plan_inverse
 
     cal = load_calibration(cal_path)
     grid = CylGrid.from_ranges((r_mm - band_mm, r_mm + band_mm), theta_step_deg=theta_step_deg,
                                r_step_mm=r_step_mm)
     try:
-        from lts360.recon.fast import FastInverse
+        from lts360.recon.triangulation.fast import FastInverse
 
         return cal, grid, FastInverse(plan_inverse(cal, grid, precompute=False))
     except RuntimeError:  # no Dr.Jit LLVM: the numpy reference
@@ -96,7 +96,7 @@ def measure_gauge_image(image, cal_path: str, *, r_true_mm: float, band_mm: floa
     """Measure one image of a round section and score it as the paper does (no truth but
     the nominal radius): circle fit, radius error, and the point radii about the centre."""
     from lts360.geometry.fit import fit_circle
-    from lts360.recon.inverse import InversePlan, inverse_triangulate
+    from lts360.recon.triangulation.inverse import InversePlan, inverse_triangulate
 
     cal, grid, kernel = _plan(str(cal_path), float(r_true_mm), band_mm, theta_step_deg, r_step_mm)
     if isinstance(kernel, InversePlan):
@@ -104,8 +104,8 @@ def measure_gauge_image(image, cal_path: str, *, r_true_mm: float, band_mm: floa
     else:
         res = kernel(image, compensate=compensate)
     if cloud_path is not None:
-        from lts360.recon.cloud import write_cloud
-        from lts360.recon.measure import result_to_cloud
+        from lts360.recon.triangulation.cloud import write_cloud
+        from lts360.recon.triangulation.measure import result_to_cloud
 
         Path(cloud_path).parent.mkdir(parents=True, exist_ok=True)
         write_cloud(cloud_path, result_to_cloud(res, z_mm=0.0, section=0))
@@ -220,8 +220,8 @@ def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str,
 
     from lts360.recon.calibration import load_calibration, save_calibration
     from lts360.recon.compensation import joint_view_offsets
-    from lts360.recon.inverse import inverse_triangulate
-    from lts360.recon.grid import CylGrid
+    from lts360.recon.triangulation.inverse import inverse_triangulate
+    from lts360.recon.triangulation.grid import CylGrid
     from lts360.scenes.objects import build_object
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import simulate_frame

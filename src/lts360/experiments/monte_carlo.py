@@ -152,7 +152,7 @@ def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
     from types import SimpleNamespace
 
     from lts360.recon.compensation import joint_view_offsets
-    from lts360.recon.inverse import inverse_triangulate
+    from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import sensor_image
 
@@ -178,7 +178,7 @@ def _nominal_calibration(path: str, renders: str, rig_name: str, theta_step_deg:
 
 
 def _grid(theta_step_deg: float):
-    from lts360.recon.grid import CylGrid
+    from lts360.recon.triangulation.grid import CylGrid
 
     r0 = GAUGE_DIAMETER_MM / 2.0
     return CylGrid.from_ranges((r0 - 0.5, r0 + 0.5), theta_step_deg=theta_step_deg,
@@ -191,7 +191,7 @@ def _nominal_radii(frame_dir: str, cal_path: str, renders: str, rig_name: str,
     """Per-view radii of a placement without noise or speckle (the speckle run's reference)."""
     from types import SimpleNamespace
 
-    from lts360.recon.inverse import inverse_triangulate
+    from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import sensor_image
 
@@ -210,7 +210,7 @@ def mc_trial(trial: Trial) -> TrialOutput:
     from types import SimpleNamespace
 
     from lts360.geometry.fit import fit_circle
-    from lts360.recon.inverse import inverse_triangulate
+    from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.recon.uncertainty import sample_calibration
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import sensor_image

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from lts360.geometry.fit import fit_circle
-from lts360.recon.cloud import VIEW_NAMES, Cloud
+from lts360.recon.triangulation.cloud import VIEW_NAMES, Cloud
 from lts360.scenes.objects import SceneObject, build_object
 
 __all__ = ["load_truth", "load_rig_truth", "signed_mesh_distance", "score_cloud", "error_stats",

@@ -6,11 +6,11 @@ a real calibration file.  Import the submodules directly; the most used names ar
 """
 
 from lts360.recon.calibration import Calibration, MirrorPlane, load_calibration, save_calibration
-from lts360.recon.cloud import Cloud, read_cloud, write_cloud
-from lts360.recon.grid import CylGrid
-from lts360.recon.inverse import (InverseResult, estimate_view_offsets, inverse_triangulate,
+from lts360.recon.triangulation.cloud import Cloud, read_cloud, write_cloud
+from lts360.recon.triangulation.grid import CylGrid
+from lts360.recon.triangulation.inverse import (InverseResult, estimate_view_offsets, inverse_triangulate,
                                   plan_inverse)
-from lts360.recon.peaks import Quality, detect_peaks
+from lts360.recon.triangulation.peaks import Quality, detect_peaks
 
 __all__ = ["Calibration", "MirrorPlane", "load_calibration", "save_calibration", "Cloud",
            "read_cloud", "write_cloud", "CylGrid", "InverseResult", "estimate_view_offsets",

@@ -44,7 +44,7 @@ from lts360.recon.camera_calibration import BoardGeometry, CameraCalibration, ca
 from lts360.recon.laser_calibration import (LaserLine, LaserPlaneEstimate, board_pose,
                                             board_pose_in_mirror,
                                             fit_laser_plane, laser_line_points)
-from lts360.recon.measure import read_image as _read
+from lts360.recon.triangulation.measure import read_image as _read
 from lts360.recon.mirror_calibration import (MirrorEstimate, MirrorObservation,
                                              detect_real_and_virtual, mirror_from_midpoints,
                                              refine_mirror, robust_refine_mirror)

@@ -18,7 +18,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from lts360.geometry.fit import fit_circle
-from lts360.recon.inverse import raw_view_points
+from lts360.recon.triangulation.inverse import raw_view_points
 
 __all__ = ["joint_view_offsets"]
 
@@ -29,7 +29,7 @@ def joint_view_offsets(result, *, reference: str = "direct", min_points: int = 1
 
     Parameters
     ----------
-    result : lts360.recon.inverse.InverseResult, or a sequence of them
+    result : lts360.recon.triangulation.inverse.InverseResult, or a sequence of them
         Measurements of a round section; their raw (uncompensated) points are used.  Several
         measurements (the reference cylinder turned or moved between shots: new speckle, new
         sensor noise) are fitted together, each with its own circle and every one with the

@@ -17,8 +17,8 @@ def case():
         pytest.skip("Dr.Jit's LLVM backend is not available")
     mi.set_variant("llvm_ad_mono")
     from lts360.recon.calibration import calibration_from_frame_truth
-    from lts360.recon.grid import CylGrid
-    from lts360.recon.inverse import plan_inverse
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.inverse import plan_inverse
     from lts360.scenes.objects import build_object
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import simulate_frame
@@ -32,7 +32,7 @@ def case():
 
 @pytest.fixture(scope="module")
 def fast(case):
-    from lts360.recon.fast import FastInverse
+    from lts360.recon.triangulation.fast import FastInverse
 
     return FastInverse(case[3], backend="llvm")
 
@@ -51,7 +51,7 @@ def _compare(ref, fast_result, *, min_found=100):
 
 
 def test_fast_path_matches_the_numpy_reference(case, fast):
-    from lts360.recon.inverse import inverse_triangulate
+    from lts360.recon.triangulation.inverse import inverse_triangulate
 
     image, cal, grid, plan = case
     _compare(inverse_triangulate(image, cal, grid, plan=plan), fast(image))
@@ -60,8 +60,8 @@ def test_fast_path_matches_the_numpy_reference(case, fast):
 def test_fast_path_flags_match_on_several_peaks_and_saturation(case, fast):
     """A second, weaker stripe (SEVERAL_PEAKS), an over-exposed copy (SATURATED) and a float
     image with NaN pixels and a threshold the kernel has not seen (it is not a literal)."""
-    from lts360.recon.inverse import inverse_triangulate
-    from lts360.recon.peaks import Quality
+    from lts360.recon.triangulation.inverse import inverse_triangulate
+    from lts360.recon.triangulation.peaks import Quality
 
     image, cal, grid, plan = case
     img = image.astype(float)
@@ -79,8 +79,8 @@ def test_fast_path_flags_match_on_several_peaks_and_saturation(case, fast):
 
 
 def test_fast_path_with_bspline_interpolation(case):
-    from lts360.recon.fast import FastInverse
-    from lts360.recon.inverse import inverse_triangulate, plan_inverse
+    from lts360.recon.triangulation.fast import FastInverse
+    from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
 
     image, cal, grid, _ = case
     plan = plan_inverse(cal, grid, precompute=False, interpolation="bspline")
@@ -88,8 +88,8 @@ def test_fast_path_with_bspline_interpolation(case):
 
 
 def test_window_layout_reproduces_the_cubic_sampler():
-    from lts360.recon.fast import window_layout
-    from lts360.recon.interp import CubicSampler, interpolation_weights, prefilter
+    from lts360.recon.triangulation.fast import window_layout
+    from lts360.recon.triangulation.interp import CubicSampler, interpolation_weights, prefilter
 
     rng = np.random.default_rng(5)
     h, w = 23, 31
@@ -116,12 +116,12 @@ def test_fast_path_rejects_a_wrong_image_size(fast):
 
 
 def test_profile_walk_matches_main_run_and_centroid():
-    """The one-pass run logic of the kernel against :func:`lts360.recon.peaks.centroid` on
+    """The one-pass run logic of the kernel against :func:`lts360.recon.triangulation.peaks.centroid` on
     random profiles: several runs, equal maxima, runs touching either end, NaN, saturation."""
     import drjit.llvm as mod
 
-    from lts360.recon.fast import _walk_profiles
-    from lts360.recon.peaks import centroid
+    from lts360.recon.triangulation.fast import _walk_profiles
+    from lts360.recon.triangulation.peaks import centroid
 
     if not dr.has_backend(dr.JitBackend.LLVM):
         pytest.skip("Dr.Jit's LLVM backend is not available")

@@ -61,7 +61,7 @@ class Quality(IntEnum):
     NO_PEAK = 1
     SATURATED = 2
     SEVERAL_PEAKS = 3
-    #: Set by :func:`lts360.recon.inverse.inverse_triangulate` only: θ outside the view's window.
+    #: Set by :func:`lts360.recon.triangulation.inverse.inverse_triangulate` only: θ outside the view's window.
     OUTSIDE_WINDOW = 4
 
 

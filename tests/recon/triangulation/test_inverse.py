@@ -10,10 +10,10 @@ from scipy.spatial import cKDTree
 
 from lts360.geometry import fit_circle, project_points
 from lts360.recon.calibration import calibration_from_dict
-from lts360.recon.grid import CylGrid
-from lts360.recon.inverse import (_shift_on_rays, estimate_view_offsets, inverse_triangulate,
+from lts360.recon.triangulation.grid import CylGrid
+from lts360.recon.triangulation.inverse import (_shift_on_rays, estimate_view_offsets, inverse_triangulate,
                                   plan_inverse)
-from lts360.recon.peaks import Quality
+from lts360.recon.triangulation.peaks import Quality
 from lts360.scenes.coverage import coverage
 from lts360.scenes.rig_io import load_rig
 from lts360.simulator.io import rig_truth
@@ -217,8 +217,8 @@ def test_bad_inputs(cal, grid):
 
 
 def test_recon_imports_no_ground_truth():
-    code = ("import sys, lts360.recon.inverse, lts360.recon.calibration, lts360.recon.views, "
-            "lts360.recon.peaks, lts360.recon.interp, lts360.recon.grid; "
+    code = ("import sys, lts360.recon.triangulation.inverse, lts360.recon.calibration, lts360.recon.triangulation.views, "
+            "lts360.recon.triangulation.peaks, lts360.recon.triangulation.interp, lts360.recon.triangulation.grid; "
             "print(sorted(m for m in sys.modules if m.startswith(('lts360.simulator', "
             "'lts360.scenes', 'mitsuba'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from lts360.recon.calibration import Calibration
-from lts360.recon.cloud import VIEW_CODES, Cloud
-from lts360.recon.grid import CylGrid
-from lts360.recon.inverse import InverseResult, inverse_triangulate, plan_inverse
+from lts360.recon.triangulation.cloud import VIEW_CODES, Cloud
+from lts360.recon.triangulation.grid import CylGrid
+from lts360.recon.triangulation.inverse import InverseResult, inverse_triangulate, plan_inverse
 
 __all__ = ["Section", "collect_sections", "measure_sections", "result_to_cloud", "read_image"]
 
@@ -87,7 +87,7 @@ def result_to_cloud(result: InverseResult, *, z_mm: float, section: int) -> Clou
 
 
 def classic_to_cloud(res: dict, *, z_mm: float, section: int) -> Cloud:
-    """Points of :func:`lts360.recon.classic.classic_triangulate` as cloud rows."""
+    """Points of :func:`lts360.recon.triangulation.classic.classic_triangulate` as cloud rows."""
     parts = []
     for name, v in res.items():
         n = len(v["r_mm"])
@@ -104,11 +104,11 @@ def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *
     """Inverse triangulation of every section with one plan.
 
     ``backend``: ``numpy`` (the reference), ``llvm`` or ``cuda`` (the Dr.Jit kernel of the
-    centroid detector, :class:`lts360.recon.fast.FastInverse`), or ``auto`` (Dr.Jit LLVM for
+    centroid detector, :class:`lts360.recon.triangulation.fast.FastInverse`), or ``auto`` (Dr.Jit LLVM for
     the centroid when available, numpy otherwise).
     """
     if method == "classic":
-        from lts360.recon.classic import classic_triangulate, view_regions
+        from lts360.recon.triangulation.classic import classic_triangulate, view_regions
 
         regions = view_regions(cal, grid)
         items = list(enumerate(sections))
@@ -122,7 +122,7 @@ def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *
         raise ValueError(f"backend must be auto, numpy, llvm or cuda, got {backend!r}")
     fast = None
     if peak == "centroid" and backend != "numpy":
-        from lts360.recon.fast import FastInverse
+        from lts360.recon.triangulation.fast import FastInverse
 
         try:
             fast = FastInverse(plan_inverse(cal, grid, precompute=False),

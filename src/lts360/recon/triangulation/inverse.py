@@ -3,14 +3,14 @@
 Pipeline, one function per stage (so that a faster backend can replace any of them and be
 tested against these):
 
-1. :func:`plan_inverse` — per view, the θ window (:func:`lts360.recon.views.view_windows`) and
+1. :func:`plan_inverse` — per view, the θ window (:func:`lts360.recon.triangulation.views.view_windows`) and
    the projection of the windowed cylindrical grid (:func:`project_grid`, paper Eq. 4:
    ``g = P · T_view · T_cam_meas · G``, with distortion); optionally a precomputed
-   :class:`~lts360.recon.interp.CubicSampler` (the projection is the same for every image of a
+   :class:`~lts360.recon.triangulation.interp.CubicSampler` (the projection is the same for every image of a
    scan);
 2. :func:`sample_profiles` — bicubic sampling of the image along every radial direction (Keys
-   by default, cubic B-spline on request: :mod:`lts360.recon.interp`);
-3. :func:`lts360.recon.peaks.detect_peaks` — one line centre per radial direction;
+   by default, cubic B-spline on request: :mod:`lts360.recon.triangulation.interp`);
+3. :func:`lts360.recon.triangulation.peaks.detect_peaks` — one line centre per radial direction;
 4. :func:`assemble_view` — radius, flags and points per θ, residual compensation (§4.4).
 
 :func:`inverse_triangulate` runs all four; :func:`estimate_view_offsets` computes the §4.4
@@ -32,10 +32,10 @@ import numpy as np
 
 from lts360.geometry.fit import fit_circle
 from lts360.recon.calibration import Calibration
-from lts360.recon.grid import CylGrid
-from lts360.recon.interp import INTERPOLATIONS, CubicSampler, sample_cubic
-from lts360.recon.peaks import PeakResult, Quality, detect_peaks
-from lts360.recon.views import (DEFAULT_MAX_INCIDENCE_DEG, DIRECT, View, get_views,
+from lts360.recon.triangulation.grid import CylGrid
+from lts360.recon.triangulation.interp import INTERPOLATIONS, CubicSampler, sample_cubic
+from lts360.recon.triangulation.peaks import PeakResult, Quality, detect_peaks
+from lts360.recon.triangulation.views import (DEFAULT_MAX_INCIDENCE_DEG, DIRECT, View, get_views,
                                 project_meas_points, view_windows)
 
 __all__ = ["ViewPlan", "InversePlan", "ViewResult", "FusedCloud", "InverseResult", "raw_view_points",
@@ -180,7 +180,7 @@ def plan_inverse(cal: Calibration, grid: CylGrid, *, views=None, windows=None,
         Keys cubic convolution (the paper's) or cubic B-spline interpolation: a smaller
         sub-pixel error of the line centre on a ~1 px wide line (3.2 → 2.4 µm rms on the
         rendered plug gauge) but more noise passed, and a prefilter of each image per view
-        (~17 ms at 1280×1024) (:mod:`lts360.recon.interp`).
+        (~17 ms at 1280×1024) (:mod:`lts360.recon.triangulation.interp`).
     """
     if interpolation not in INTERPOLATIONS:
         raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
-from lts360.recon.interp import (CubicSampler, bspline_weights, keys_kernel, keys_weights,
+from lts360.recon.triangulation.interp import (CubicSampler, bspline_weights, keys_kernel, keys_weights,
                                  sample_cubic)
 
 H, W = 40, 56

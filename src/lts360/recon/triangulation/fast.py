@@ -1,7 +1,7 @@
 """The per-image hot path of inverse triangulation as one Dr.Jit kernel (LLVM on CPU, CUDA on GPU).
 
-Same arithmetic as the numpy reference (:mod:`lts360.recon.inverse` with the ``centroid``
-detector of :mod:`lts360.recon.peaks`), which it is tested against: bicubic sampling of the
+Same arithmetic as the numpy reference (:mod:`lts360.recon.triangulation.inverse` with the ``centroid``
+detector of :mod:`lts360.recon.triangulation.peaks`), which it is tested against: bicubic sampling of the
 image at the planned grid points (Keys, or cubic B-spline when the plan asks for it — the
 B-spline prefilter then runs on the host), then per radial direction the main run above the
 threshold, its thresholded centroid and the quality flag.  Single precision on the device (the
@@ -14,14 +14,14 @@ How it is laid out (the plan is fixed for a scan, the image changes):
   apart.  The plan stores, per point, the index of its window (``uint32``) and its fractional
   position inside it (two ``float32``; NaN outside the image); per image, one small gather
   copies the 16 taps of every window into a table (``16 × n_windows`` floats; edge pixels
-  replicated, or B-spline coefficients mirrored, as :mod:`lts360.recon.interp` pads), so that
+  replicated, or B-spline coefficients mirrored, as :mod:`lts360.recon.triangulation.interp` pads), so that
   each sample reads its 16 taps with one packet load of 64 contiguous bytes instead of 16
   scattered gathers.
 * **One thread per radial direction.**  A single kernel walks each profile from the inner to
   the outer radius, sampling as it goes, and keeps a running account of the runs above the
   threshold (start, maximum, Σw, Σw·j of the current and of the strongest run, the largest
   maximum of the other runs) and of the profile's maximum — the quantities
-  :func:`lts360.recon.peaks.main_run` and :func:`~lts360.recon.peaks.centroid` compute with
+  :func:`lts360.recon.triangulation.peaks.main_run` and :func:`~lts360.recon.triangulation.peaks.centroid` compute with
   whole-array passes.  No intermediate sample array, no block reductions, no atomics: the
   sums are accumulated in profile order (deterministic).  A run replaces the strongest one
   only if its maximum is strictly larger, so ties resolve to the first maximum as
@@ -42,10 +42,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from lts360.recon.interp import prefilter
-from lts360.recon.inverse import (DEFAULT_ACCEPT, InversePlan, InverseResult, assemble_view,
+from lts360.recon.triangulation.interp import prefilter
+from lts360.recon.triangulation.inverse import (DEFAULT_ACCEPT, InversePlan, InverseResult, assemble_view,
                                   default_saturation, default_threshold)
-from lts360.recon.peaks import DEFAULT_SECOND_PEAK_FRACTION, PeakResult, Quality
+from lts360.recon.triangulation.peaks import DEFAULT_SECOND_PEAK_FRACTION, PeakResult, Quality
 
 __all__ = ["FastInverse", "window_layout"]
 
@@ -73,14 +73,14 @@ def _backend(name: str):
 
 def _keys_weights(t):
     """Keys (a = −0.5) weights of the taps −1, 0, 1, 2 at fractional position ``t`` — the closed
-    form of :func:`lts360.recon.interp.keys_weights`, on Dr.Jit arrays."""
+    form of :func:`lts360.recon.triangulation.interp.keys_weights`, on Dr.Jit arrays."""
     tm1 = t - 1.0
     return (-0.5 * t * tm1 * tm1, 0.5 * ((3.0 * t - 5.0) * t * t + 2.0),
             0.5 * t * ((4.0 - 3.0 * t) * t + 1.0), 0.5 * t * t * tm1)
 
 
 def _bspline_weights(t):
-    """:func:`lts360.recon.interp.bspline_weights` on Dr.Jit arrays."""
+    """:func:`lts360.recon.triangulation.interp.bspline_weights` on Dr.Jit arrays."""
     s = 1.0 - t
     return (s * s * s * (1.0 / 6.0), ((3.0 * t - 6.0) * t * t + 4.0) * (1.0 / 6.0),
             (((-3.0 * t + 3.0) * t + 3.0) * t + 1.0) * (1.0 / 6.0), t * t * t * (1.0 / 6.0))
@@ -107,7 +107,7 @@ def window_layout(uv: np.ndarray, image_shape, *, boundary: str = "edge"
         ``(height, width)``.
     boundary : {"edge", "mirror"}
         Taps beyond the border: the edge pixel (Keys) or the mirrored one (B-spline
-        coefficients), as :mod:`lts360.recon.interp` pads.
+        coefficients), as :mod:`lts360.recon.triangulation.interp` pads.
 
     Returns
     -------
@@ -148,7 +148,7 @@ def _walk_profiles(dr, mod, sample, n: int, nr: int, threshold: float,
     """The main run and thresholded centroid of ``n`` profiles in one pass each (Dr.Jit).
 
     ``sample(j)`` returns the ``j``-th sample of every profile (a Float of size ``n``; NaN
-    counts as below the threshold, as in :func:`lts360.recon.peaks.main_run`).  The loop keeps,
+    counts as below the threshold, as in :func:`lts360.recon.triangulation.peaks.main_run`).  The loop keeps,
     per profile, the current run above the threshold and the strongest run so far (start,
     maximum, Σw, Σw·(j − start), w = value − threshold), the largest maximum of the other runs
     and the profile's maximum.  A run replaces the strongest one only if its maximum is strictly
@@ -217,7 +217,7 @@ class FastInverse:
     Parameters
     ----------
     plan : InversePlan
-        From :func:`lts360.recon.inverse.plan_inverse` (the sampler need not be precomputed).
+        From :func:`lts360.recon.triangulation.inverse.plan_inverse` (the sampler need not be precomputed).
     backend : {"llvm", "cuda"}
 
     Notes

@@ -22,8 +22,8 @@ from scipy import ndimage
 
 from lts360.geometry.camera import backproject_pixels
 from lts360.recon.calibration import Calibration
-from lts360.recon.grid import CylGrid
-from lts360.recon.inverse import default_threshold, plan_inverse
+from lts360.recon.triangulation.grid import CylGrid
+from lts360.recon.triangulation.inverse import default_threshold, plan_inverse
 
 __all__ = ["StripeCentres", "steger_centres", "view_regions", "classic_triangulate"]
 

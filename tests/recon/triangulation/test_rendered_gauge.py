@@ -58,9 +58,9 @@ mi = pytest.importorskip("mitsuba", reason="rendering needs Mitsuba 3")
 
 from lts360.experiments.score import score_cloud  # noqa: E402
 from lts360.recon.calibration import calibration_from_frame_truth  # noqa: E402
-from lts360.recon.grid import CylGrid  # noqa: E402
-from lts360.recon.inverse import inverse_triangulate  # noqa: E402
-from lts360.recon.measure import result_to_cloud  # noqa: E402
+from lts360.recon.triangulation.grid import CylGrid  # noqa: E402
+from lts360.recon.triangulation.inverse import inverse_triangulate  # noqa: E402
+from lts360.recon.triangulation.measure import result_to_cloud  # noqa: E402
 from lts360.scenes.objects import build_object  # noqa: E402
 from lts360.scenes.rig_io import load_rig  # noqa: E402
 
@@ -119,8 +119,8 @@ def test_classic_baseline_on_the_same_image(rendered):
     ~490 points (one per stripe pixel) against the inverse method's 4385 (one per 0.1° per
     view).
     """
-    from lts360.recon.classic import classic_triangulate
-    from lts360.recon.measure import classic_to_cloud
+    from lts360.recon.triangulation.classic import classic_triangulate
+    from lts360.recon.triangulation.measure import classic_to_cloud
 
     obj, frame, cal = rendered
     grid = CylGrid.from_ranges((8.0, 12.0), theta_step_deg=0.2, r_step_mm=0.005)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from lts360.recon.calibration import calibration_from_dict
-from lts360.recon.grid import CylGrid
-from lts360.recon.views import get_views, make_views, view_windows
+from lts360.recon.triangulation.grid import CylGrid
+from lts360.recon.triangulation.views import get_views, make_views, view_windows
 from lts360.scenes.coverage import coverage
 from lts360.scenes.rig_io import load_rig
 from lts360.simulator.io import rig_truth

@@ -12,7 +12,7 @@ Tolerances (about 1.4× those figures), from the geometry:
 
 * round, matte or ground (gauge, PVC, undercut shaft at its plain section): the floor of the
   line centre on this rig — sheet thickness, pixel locking of a ~1 px line, defocus — 8–9 µm
-  (tests/recon/test_rendered_gauge.py breaks it down); 12 µm, full coverage;
+  (tests/recon/triangulation/test_rendered_gauge.py breaks it down); 12 µm, full coverage;
 * brass and machined aluminium (cut tube, alu pipe): a glossy lobe makes the line's
   brightness vary across the sheet (alu: −15 µm mean); 18 / 30 µm, full coverage;
 * cube (28 mm, V-groove): edges cut the 0.6 mm sheet and the groove hides its flanks; 40 µm,
@@ -48,9 +48,9 @@ def test_object_section_within_its_tolerance(name):
     from lts360.experiments.examples_study import _radius_band
     from lts360.experiments.score import score_cloud
     from lts360.recon.calibration import calibration_from_frame_truth
-    from lts360.recon.grid import CylGrid
-    from lts360.recon.inverse import inverse_triangulate
-    from lts360.recon.measure import result_to_cloud
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.inverse import inverse_triangulate
+    from lts360.recon.triangulation.measure import result_to_cloud
     from lts360.scenes.objects import build_object
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import simulate_frame

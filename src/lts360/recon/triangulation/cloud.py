@@ -3,7 +3,7 @@
 Written as binary little-endian PLY with per-vertex attributes, readable by trimesh, Open3D and
 any PLY reader: ``x y z`` (measurement frame, mm; ``z`` is the stage position of the
 section), ``theta`` (rad), ``radius`` (mm), ``view`` (uchar, see :data:`VIEW_CODES`),
-``quality`` (uchar, :class:`lts360.recon.peaks.Quality`; points that gave no valid
+``quality`` (uchar, :class:`lts360.recon.triangulation.peaks.Quality`; points that gave no valid
 measurement are NaN and keep the reason here),
 ``section`` (int), ``intensity`` (float, peak grey value).
 """
@@ -38,7 +38,7 @@ class Cloud:
     view : (n,) uint8
         :data:`VIEW_CODES`.
     quality : (n,) uint8
-        :class:`lts360.recon.peaks.Quality` of the θ: a valid point (finite) is FOUND (0) or
+        :class:`lts360.recon.triangulation.peaks.Quality` of the θ: a valid point (finite) is FOUND (0) or
         SATURATED (2); an invalid one (NaN) keeps the reason it gave no point.
     section : (n,) int32
     intensity : (n,) float32
