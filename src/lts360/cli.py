@@ -159,7 +159,7 @@ def _progress(items, desc):
 
 
 def _cmd_measure(args) -> int:
-    from lts360.recon.calibration import load_calibration
+    from lts360.recon.calibration.model import load_calibration
     from lts360.recon.triangulation.cloud import write_cloud
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.measure import collect_sections, measure_sections
@@ -194,8 +194,8 @@ def _cmd_measure(args) -> int:
 def _cmd_compensate(args) -> int:
     import dataclasses
 
-    from lts360.recon.calibration import load_calibration, save_calibration
-    from lts360.recon.compensation import joint_view_offsets
+    from lts360.recon.calibration.model import load_calibration, save_calibration
+    from lts360.recon.calibration.compensation import joint_view_offsets
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.recon.triangulation.measure import collect_sections, read_image

@@ -18,7 +18,7 @@ def _offsets(path):
 
 
 def test_offsets_follow_a_shifted_mirror(tmp_path, capsys):
-    from lts360.recon.calibration import load_calibration, save_calibration
+    from lts360.recon.calibration.model import load_calibration, save_calibration
 
     ref = tmp_path / "ref"
     assert main(["render", "--object", "plug-gauge", "--out", str(ref), "--spp", "16",

@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lts360.recon.calibrate import RigCalibrationResult, calibrate_rig, read_calibration_images
-from lts360.recon.calibration import Calibration, calibration_from_frame_truth, save_calibration
+from lts360.recon.calibration.from_images import RigCalibrationResult, calibrate_rig, read_calibration_images
+from lts360.recon.calibration.model import Calibration, calibration_from_frame_truth, save_calibration
 
 __all__ = ["run_calibrate", "calibration_accuracy", "calibration_report", "plot_fig8",
            "format_report"]
@@ -108,7 +108,7 @@ def plot_fig8(result: RigCalibrationResult, images_dir: Path, path: Path) -> Non
     import cv2
     import matplotlib.pyplot as plt
 
-    from lts360.recon.mirror_calibration import _pose, _transform
+    from lts360.recon.calibration.mirrors import _pose, _transform
 
     imgs = read_calibration_images(images_dir)
     board = imgs.board
@@ -173,9 +173,9 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
     ``target_spp``: samples per pixel of the mirror and laser shots (default ``spp``); see
     :func:`lts360.simulator.calib_render.render_calibration_images`.
 
-    ``camera_model_rounds``: see :func:`lts360.recon.calibrate.calibrate_rig` (default there).
+    ``camera_model_rounds``: see :func:`lts360.recon.calibration.from_images.calibrate_rig` (default there).
     """
-    from lts360.recon.calibrate import CAMERA_MODEL_ROUNDS
+    from lts360.recon.calibration.from_images import CAMERA_MODEL_ROUNDS
 
     if camera_model_rounds is None:
         camera_model_rounds = CAMERA_MODEL_ROUNDS

@@ -48,7 +48,7 @@ def examples_trial(trial: Trial) -> TrialOutput:
     import mitsuba as mi
 
     from lts360.experiments.score import score_cloud
-    from lts360.recon.calibration import calibration_from_frame_truth, load_calibration
+    from lts360.recon.calibration.model import calibration_from_frame_truth, load_calibration
     from lts360.recon.triangulation.cloud import Cloud, write_cloud
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.measure import result_to_cloud

@@ -75,7 +75,7 @@ def _plan(cal_path, r_mm: float, band_mm: float, theta_step_deg: float, r_step_m
 @functools.lru_cache(maxsize=4)
 def _cached_plan(cal_path: str, version: tuple, r_mm: float, band_mm: float,
                  theta_step_deg: float, r_step_mm: float):
-    from lts360.recon.calibration import load_calibration
+    from lts360.recon.calibration.model import load_calibration
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.inverse import plan_inverse
 
@@ -212,14 +212,14 @@ def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str,
                              seed: int, shots: int = 1) -> Path:
     """§4.4: measure the gauge at the nominal position (``shots`` times, turned about its axis
     between shots: new speckle, new sensor noise), put the mirror views on one circle with the
-    direct view (:func:`lts360.recon.compensation.joint_view_offsets`, all shots jointly),
+    direct view (:func:`lts360.recon.calibration.compensation.joint_view_offsets`, all shots jointly),
     store their offsets in a copy of the calibration."""
     import dataclasses
 
     import mitsuba as mi
 
-    from lts360.recon.calibration import load_calibration, save_calibration
-    from lts360.recon.compensation import joint_view_offsets
+    from lts360.recon.calibration.model import load_calibration, save_calibration
+    from lts360.recon.calibration.compensation import joint_view_offsets
     from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.scenes.objects import build_object

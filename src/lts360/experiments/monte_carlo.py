@@ -137,7 +137,7 @@ def _placement(frame_dir: str):
 
 @functools.lru_cache(maxsize=2)
 def _calibration(path: str):
-    from lts360.recon.calibration import load_calibration
+    from lts360.recon.calibration.model import load_calibration
 
     return load_calibration(path)
 
@@ -151,7 +151,7 @@ def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
     fitted jointly."""
     from types import SimpleNamespace
 
-    from lts360.recon.compensation import joint_view_offsets
+    from lts360.recon.calibration.compensation import joint_view_offsets
     from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import sensor_image
@@ -211,7 +211,7 @@ def mc_trial(trial: Trial) -> TrialOutput:
 
     from lts360.geometry.fit import fit_circle
     from lts360.recon.triangulation.inverse import inverse_triangulate
-    from lts360.recon.uncertainty import sample_calibration
+    from lts360.recon.calibration.uncertainty import sample_calibration
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import sensor_image
 
@@ -320,7 +320,7 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
     ``compensate=False``: every trial measures without the §4.4 compensation (the view
     offsets of ``calibration`` are ignored) and the ``compensation`` input is left out.
     ``compensation_shots``: images of the reference placement each compensation is fitted
-    to (jointly, :func:`lts360.recon.compensation.joint_view_offsets`); the ``compensation``
+    to (jointly, :func:`lts360.recon.calibration.compensation.joint_view_offsets`); the ``compensation``
     input's spread falls as ``1/√shots``."""
     if not 1 <= int(compensation_shots) <= 100:
         raise ValueError(f"compensation_shots must be in [1, 100], got {compensation_shots}")

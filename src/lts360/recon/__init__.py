@@ -1,15 +1,19 @@
-"""Image → 3-D: calibration model, inverse triangulation (paper §3.2), peak detectors, the
-classical baseline and measured clouds.
+"""Image → 3-D, in two parts side by side:
+
+- :mod:`lts360.recon.calibration`: images of chessboards → the rig's calibration (camera,
+  mirrors, laser plane, their uncertainty, the §4.4 view offsets);
+- :mod:`lts360.recon.triangulation`: an image and a calibration → a measured section (inverse
+  triangulation of paper §3.2, peak detectors, the classical baseline, clouds).
 
 Never imports :mod:`lts360.simulator` or any ground truth: it runs on real camera images and
 a real calibration file.  Import the submodules directly; the most used names are here.
 """
 
-from lts360.recon.calibration import Calibration, MirrorPlane, load_calibration, save_calibration
+from lts360.recon.calibration.model import Calibration, MirrorPlane, load_calibration, save_calibration
 from lts360.recon.triangulation.cloud import Cloud, read_cloud, write_cloud
 from lts360.recon.triangulation.grid import CylGrid
-from lts360.recon.triangulation.inverse import (InverseResult, estimate_view_offsets, inverse_triangulate,
-                                  plan_inverse)
+from lts360.recon.triangulation.inverse import (InverseResult, estimate_view_offsets,
+                                               inverse_triangulate, plan_inverse)
 from lts360.recon.triangulation.peaks import Quality, detect_peaks
 
 __all__ = ["Calibration", "MirrorPlane", "load_calibration", "save_calibration", "Cloud",

@@ -21,7 +21,7 @@ import numpy as np
 from scipy import ndimage
 
 from lts360.geometry.camera import backproject_pixels
-from lts360.recon.calibration import Calibration
+from lts360.recon.calibration.model import Calibration
 from lts360.recon.triangulation.grid import CylGrid
 from lts360.recon.triangulation.inverse import default_threshold, plan_inverse
 

@@ -31,7 +31,7 @@ from typing import Mapping
 import numpy as np
 
 from lts360.geometry.fit import fit_circle
-from lts360.recon.calibration import Calibration
+from lts360.recon.calibration.model import Calibration
 from lts360.recon.triangulation.grid import CylGrid
 from lts360.recon.triangulation.interp import INTERPOLATIONS, CubicSampler, sample_cubic
 from lts360.recon.triangulation.peaks import PeakResult, Quality, detect_peaks
@@ -546,7 +546,7 @@ def estimate_view_offsets(result: InverseResult, *, reference: str = DIRECT,
     is the translation of its centre onto the reference view's centre.  The returned values
     are absolute: store them as ``Calibration.view_offsets_mm``
     (``dataclasses.replace(cal, view_offsets_mm=offsets)``) whatever the result's own
-    compensation was.  :func:`lts360.recon.compensation.joint_view_offsets` fits one circle
+    compensation was.  :func:`lts360.recon.calibration.compensation.joint_view_offsets` fits one circle
     to all views instead (better conditioned for ~150° arcs).
 
     Raises

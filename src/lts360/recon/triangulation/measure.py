@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lts360.recon.calibration import Calibration
+from lts360.recon.calibration.model import Calibration
 from lts360.recon.triangulation.cloud import VIEW_CODES, Cloud
 from lts360.recon.triangulation.grid import CylGrid
 from lts360.recon.triangulation.inverse import InverseResult, inverse_triangulate, plan_inverse

@@ -34,7 +34,7 @@ import numpy as np
 
 from lts360.geometry.camera import project_camera_points
 from lts360.geometry.mirror import mirror_matrix, transform_plane
-from lts360.recon.calibration import Calibration
+from lts360.recon.calibration.model import Calibration
 
 __all__ = ["View", "make_views", "get_views", "view_transform", "project_meas_points",
            "view_windows", "DEFAULT_MAX_INCIDENCE_DEG", "DIRECT"]

@@ -19,7 +19,7 @@ import pytest
 cv2 = pytest.importorskip("cv2", reason="calibration needs OpenCV")
 
 from lts360.geometry.camera import project_points  # noqa: E402
-from lts360.recon.camera_calibration import (BoardGeometry, calibrate_camera,  # noqa: E402
+from lts360.recon.calibration.camera import (BoardGeometry, calibrate_camera,  # noqa: E402
                                              intrinsics_jackknife)
 from lts360.scenes.calib_plan import plan_calibration  # noqa: E402
 from lts360.scenes.rig_io import load_rig  # noqa: E402
@@ -77,7 +77,7 @@ def test_the_jackknife_agrees_with_opencv_for_independent_corner_errors(boards):
 
 
 def test_calibrate_camera_reports_it(boards, monkeypatch):
-    import lts360.recon.camera_calibration as cc
+    import lts360.recon.calibration.camera as cc
 
     cam, geo, exact = boards
     rng = np.random.default_rng(3)

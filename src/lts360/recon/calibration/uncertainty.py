@@ -9,7 +9,7 @@ The layout of ``Calibration.uncertainty`` (JSON):
 
 * ``camera.std`` — standard deviations of ``fx fy cx cy`` (px) and ``k1 k2 p1 p2 k3``;
   ``camera.std_method`` says whose: ``"jackknife over boards"``
-  (:func:`lts360.recon.camera_calibration.intrinsics_jackknife`) or ``"opencv"`` (its
+  (:func:`lts360.recon.calibration.camera.intrinsics_jackknife`) or ``"opencv"`` (its
   ``stdDeviationsIntrinsics``, which assume independent corner errors and understate the
   spread when a board's corners share an error); ``camera.std_opencv`` keeps OpenCV's;
 * ``camera.cov`` with ``camera.cov_names`` (optional) — the covariance of those parameters
@@ -108,7 +108,7 @@ def sample_calibration(cal, rng: np.random.Generator):
     The measurement frame is rebuilt from the drawn laser plane so that it stays valid: its
     origin is projected onto the new plane and its z axis turned onto the new normal.
     """
-    from lts360.recon.calibration import MirrorPlane, make_T_cam_meas
+    from lts360.recon.calibration.model import MirrorPlane, make_T_cam_meas
 
     u = cal.uncertainty or {}
     K, dist = cal.K.copy(), cal.dist.copy()

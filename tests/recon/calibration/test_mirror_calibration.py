@@ -15,8 +15,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from lts360.recon.camera_calibration import BoardGeometry
-from lts360.recon.mirror_calibration import detect_real_and_virtual, mirror_from_midpoints
+from lts360.recon.calibration.camera import BoardGeometry
+from lts360.recon.calibration.mirrors import detect_real_and_virtual, mirror_from_midpoints
 
 SPP = 64  # saddle-point corners need a cleaner image than SB (see the module docstring)
 
@@ -63,7 +63,7 @@ def test_one_board_seen_directly_and_in_the_right_mirror():
 def _synthetic_mirror_shots(seed=3, n=6, noise_px=0.03):
     """Planned mirror shots of the paper rig projected exactly, plus Gaussian corner noise."""
     from lts360.geometry.camera import project_camera_points
-    from lts360.recon.mirror_calibration import MirrorObservation
+    from lts360.recon.calibration.mirrors import MirrorObservation
     from lts360.scenes.calib_plan import plan_calibration
     from lts360.scenes.rig_io import load_rig
 
@@ -93,7 +93,7 @@ def test_refine_mirror_leaves_out_a_shifted_column_of_corners():
     0.001° of the fit to clean corners (measured over seeds 0–5: ≤ 1.5 µm, the information
     of the left-out corners; the clean fit itself is 1–5 µm from the truth); an unguarded
     fit moves by 50–130 µm (offset at the camera centre, ~250 mm from the mirror)."""
-    from lts360.recon.mirror_calibration import MirrorObservation, refine_mirror
+    from lts360.recon.calibration.mirrors import MirrorObservation, refine_mirror
 
     obs, geo, K, n_c, d_c = _synthetic_mirror_shots(noise_px=0.01)
     clean = refine_mirror(obs, geo, K, np.zeros(5))
@@ -119,7 +119,7 @@ def test_an_image_with_wrong_virtual_corners_is_discarded():
     second fit that they had already pulled: here the plane 375 µm off and the other images
     at 0.05–0.07 px RMS (on the f/8 shots 0.045 against 0.008 px without it).  Synthetic,
     0.01 px corner noise."""
-    from lts360.recon.mirror_calibration import (MirrorObservation, refine_mirror,
+    from lts360.recon.calibration.mirrors import (MirrorObservation, refine_mirror,
                                                  robust_refine_mirror)
 
     obs, geo, K, n_c, d_c = _synthetic_mirror_shots(noise_px=0.01)

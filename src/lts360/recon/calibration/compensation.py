@@ -4,7 +4,7 @@ The paper fits a circle to each view's points and translates each mirror view's 
 the direct view's centre.  Here one circle (centre, radius) and one translation per mirror
 view are fitted to all the points together (the reference view's translation is zero).
 
-The two trade off (tests/recon/test_compensation.py): a free-radius circle on a ~150° arc
+The two trade off (tests/recon/calibration/test_compensation.py): a free-radius circle on a ~150° arc
 has a poorly conditioned centre (with 5 µm point noise the joint fit's offsets scatter
 0.74× as much as the paper's), but it ignores a view's own radius error, which the joint fit turns
 into a translation (a view reading 5 µm large gets a ~3.8 µm offset).  On rendered gauges the

@@ -13,7 +13,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from lts360.recon.camera_calibration import BoardGeometry, calibrate_camera
+from lts360.recon.calibration.camera import BoardGeometry, calibrate_camera
 
 mi = pytest.importorskip("mitsuba", reason="rendering the calibration images needs Mitsuba 3")
 pytest.importorskip("cv2", reason="calibration needs OpenCV")
@@ -74,7 +74,7 @@ def test_corners_far_off_the_fit_are_left_out(monkeypatch):
     a blurred edge; measured on renders) are found and left out, the rest of their images
     kept.  Synthetic corners: the planned poses projected exactly, 0.03 px noise, and one
     corner moved in each of eight images; the detector is replaced by a lookup."""
-    import lts360.recon.camera_calibration as cc
+    import lts360.recon.calibration.camera as cc
     from lts360.geometry.camera import project_points
     from lts360.scenes.calib_plan import plan_calibration
     from lts360.scenes.rig_io import load_rig
@@ -127,7 +127,7 @@ def test_symmetrized_corners_do_not_depend_on_the_board_handedness():
     mi.set_variant("llvm_ad_mono")
     from scipy.spatial import cKDTree
 
-    from lts360.recon.camera_calibration import detect_corners
+    from lts360.recon.calibration.camera import detect_corners
     from lts360.scenes.rig_io import load_rig
     from lts360.scenes.targets import Chessboard
     from lts360.simulator.render import render_radiance

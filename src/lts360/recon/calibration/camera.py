@@ -138,7 +138,7 @@ def intrinsics_jackknife(object_points, image_points, image_size, K, dist, *, fl
     """
     import cv2
 
-    from lts360.recon.uncertainty import jackknife_covariance
+    from lts360.recon.calibration.uncertainty import jackknife_covariance
 
     m = len(object_points)
     if m < 3 or len(image_points) != m:
@@ -163,7 +163,7 @@ def corner_outlier_limit(errors_px: np.ndarray, floor_px: float) -> float:
     standard deviations of ``errors_px`` (the distances of many corners from their fit,
     σ ≈ 1.4826 × median), whichever is larger.  Used where many boards share one fit (Zhang,
     the mirror planes); a single board's fit needs the worst-first rule of
-    :func:`lts360.recon.laser_calibration.board_pose`."""
+    :func:`lts360.recon.calibration.laser_plane.board_pose`."""
     return max(float(floor_px), 4.0 * 1.4826 * float(np.median(errors_px)))
 
 
@@ -271,7 +271,7 @@ def calibrate_camera(images, board: BoardGeometry, *, max_image_rms_px: float = 
 
     ``board_model_rounds`` > 0: then place every corner of the kept boards by the image
     model of the four squares around it
-    (:func:`lts360.recon.board_model.refine_corners_locally`: the corners follow the image
+    (:func:`lts360.recon.calibration.board_model.refine_corners_locally`: the corners follow the image
     whatever the current camera model) and calibrate again on those corners, that many
     times, leaving out corners as above with ``model_outlier_px`` for ``corner_outlier_px``
     (the model's corners are ~5 times more precise).  Slow (LM per corner) but every pixel
@@ -354,7 +354,7 @@ def _board_model_corners(images, board, K, dist, rvecs, tvecs, progress=None) ->
 
     import cv2
 
-    from lts360.recon.board_model import refine_corners_locally
+    from lts360.recon.calibration.board_model import refine_corners_locally
 
     def one(args):
         image, r, t = args

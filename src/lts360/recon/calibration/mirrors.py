@@ -25,7 +25,7 @@ from scipy.optimize import least_squares
 
 from lts360.geometry.camera import project_camera_points
 from lts360.geometry.fit import fit_plane
-from lts360.recon.camera_calibration import BoardGeometry, _to_u8, corner_outlier_limit
+from lts360.recon.calibration.camera import BoardGeometry, _to_u8, corner_outlier_limit
 
 __all__ = ["MirrorObservation", "MirrorEstimate", "detect_real_and_virtual", "mirror_from_midpoints",
            "refine_mirror", "robust_refine_mirror", "per_image_rms"]
@@ -87,14 +87,14 @@ def detect_real_and_virtual(image, board: BoardGeometry, K, dist, *,
     behind.
 
     ``photometric``: refine both boards' corners by fitting each board's image model to the
-    image (:mod:`lts360.recon.board_model`).  Measured on rendered mirror shots of the paper
+    image (:mod:`lts360.recon.calibration.board_model`).  Measured on rendered mirror shots of the paper
     board (64 spp, 4–5 px of defocus): corner RMS against the true projections 0.008–0.018 px
     (virtual) and 0.010–0.032 px (real), against 0.09–0.15 and 0.12–0.35 px from the
     detectors.
     """
     import cv2
 
-    from lts360.recon.camera_calibration import _refine_saddle, detect_corners
+    from lts360.recon.calibration.camera import _refine_saddle, detect_corners
 
     im8 = _to_u8(image)
     # Saddle-point corners for both boards (``detect_corners(refine=True)``): SB pulls the
@@ -154,12 +154,12 @@ def detect_real_and_virtual(image, board: BoardGeometry, K, dist, *,
 
 def _photometric_corners(image, corners, obj, board, K, dist, *, mirrored: bool):
     """The corners re-projected from the board's pose fitted to the image by its image model
-    (:func:`lts360.recon.board_model.refine_board_pose`); the detected corners where that
+    (:func:`lts360.recon.calibration.board_model.refine_board_pose`); the detected corners where that
     fit fails.  ``obj``: the object points the corners were ordered for (x negated for a
     board seen in a mirror)."""
     import cv2
 
-    from lts360.recon.board_model import refine_board_pose
+    from lts360.recon.calibration.board_model import refine_board_pose
 
     rvec, tvec = _pose(obj, corners, K, dist)
     R0, _ = cv2.Rodrigues(rvec)

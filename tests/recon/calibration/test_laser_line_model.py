@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from lts360.recon.camera_calibration import BoardGeometry
-from lts360.recon.laser_calibration import laser_line_points
-from lts360.recon.laser_line_model import fit_line_on_board
+from lts360.recon.calibration.camera import BoardGeometry
+from lts360.recon.calibration.laser_plane import laser_line_points
+from lts360.recon.calibration.laser_line_model import fit_line_on_board
 
 pytest.importorskip("cv2")
 

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from lts360.recon.compensation import joint_view_offsets
+from lts360.recon.calibration.compensation import joint_view_offsets
 from lts360.recon.triangulation.inverse import estimate_view_offsets
 from lts360.recon.triangulation.peaks import Quality
 

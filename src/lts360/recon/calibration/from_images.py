@@ -39,16 +39,16 @@ from pathlib import Path
 
 import numpy as np
 
-from lts360.recon.calibration import Calibration, MirrorPlane, make_T_cam_meas
-from lts360.recon.camera_calibration import BoardGeometry, CameraCalibration, calibrate_camera
-from lts360.recon.laser_calibration import (LaserLine, LaserPlaneEstimate, board_pose,
+from lts360.recon.calibration.model import Calibration, MirrorPlane, make_T_cam_meas
+from lts360.recon.calibration.camera import BoardGeometry, CameraCalibration, calibrate_camera
+from lts360.recon.calibration.laser_plane import (LaserLine, LaserPlaneEstimate, board_pose,
                                             board_pose_in_mirror,
                                             fit_laser_plane, laser_line_points)
 from lts360.recon.triangulation.measure import read_image as _read
-from lts360.recon.mirror_calibration import (MirrorEstimate, MirrorObservation,
+from lts360.recon.calibration.mirrors import (MirrorEstimate, MirrorObservation,
                                              detect_real_and_virtual, mirror_from_midpoints,
                                              refine_mirror, robust_refine_mirror)
-from lts360.recon.uncertainty import (CAMERA_STD_NAMES, jackknife_covariance, plane_offset_abd)
+from lts360.recon.calibration.uncertainty import (CAMERA_STD_NAMES, jackknife_covariance, plane_offset_abd)
 
 __all__ = ["CalibrationImages", "read_calibration_images", "calibrate_rig",
            "measurement_frame_from_mirrors", "RigCalibrationResult", "select_laser_lines"]
@@ -236,7 +236,7 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
 
     ``camera_model_rounds``: rounds of Zhang's method on the camera boards' corners from
     their image model (``board_model_rounds`` of
-    :func:`lts360.recon.camera_calibration.calibrate_camera`); 0: on the detected corners.
+    :func:`lts360.recon.calibration.camera.calibrate_camera`); 0: on the detected corners.
 
     Raises
     ------
@@ -375,7 +375,7 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
                     for name, (lsq, g) in planes.items()},
         "laser_plane": _plane_unc(laser.normal, laser.d_mm, laser.covariance, laser_groups),
         "parameterisation": "planes: n' = normalise(n + a e1 + b e2), d' = d + delta; "
-                            "lts360.recon.uncertainty.tangent_basis(n) gives e1, e2",
+                            "lts360.recon.calibration.uncertainty.tangent_basis(n) gives e1, e2",
     }
     cal = Calibration(image_size=cam.image_size, K=K, dist=dist,
                       mirrors=tuple(mirror_planes[k] for k in sorted(mirror_planes)),
@@ -390,7 +390,7 @@ def _lsq_abd_cov(est: MirrorEstimate) -> np.ndarray:
     """The (θ, φ, d) covariance of :func:`refine_mirror` in the (a, b, δ) parameterisation."""
     if est.covariance is None:
         return np.full((3, 3), np.nan)
-    from lts360.recon.uncertainty import tangent_basis
+    from lts360.recon.calibration.uncertainty import tangent_basis
 
     n = est.normal
     th, ph = np.arccos(np.clip(n[2], -1, 1)), np.arctan2(n[1], n[0])

@@ -13,7 +13,7 @@ not parallel are needed: collinear points fail with an error (``fit_plane``).
 
 The line on a plane is straight (after undistortion): a robust straight-line fit per pose
 through the detected centres starts a fit of the band's image model on the printed board
-(:mod:`lts360.recon.laser_line_model`), which takes out the pull of the black squares on the
+(:mod:`lts360.recon.calibration.laser_line_model`), which takes out the pull of the black squares on the
 detected centres.
 """
 
@@ -25,7 +25,7 @@ import numpy as np
 
 from lts360.geometry.camera import backproject_pixels, project_camera_points
 from lts360.geometry.fit import fit_plane
-from lts360.recon.camera_calibration import BoardGeometry, detect_corners
+from lts360.recon.calibration.camera import BoardGeometry, detect_corners
 from lts360.recon.triangulation.classic import steger_centres
 
 __all__ = ["LaserLine", "LaserPlaneEstimate", "board_pose", "board_pose_in_mirror",
@@ -101,7 +101,7 @@ def board_pose_in_mirror(real_px: np.ndarray, virtual_px: np.ndarray, board: Boa
     """``(R, t)`` board → camera from the board seen directly and in a mirror of known plane
     ``n · X = d`` (camera frame): the pose that reprojects both the real corners and their
     mirror images (the virtual corners, in the physical corners' order as
-    :func:`lts360.recon.mirror_calibration.detect_real_and_virtual` gives them) best, by
+    :func:`lts360.recon.calibration.mirrors.detect_real_and_virtual` gives them) best, by
     Levenberg–Marquardt from the direct view's PnP pose.
 
     One view fixes a board's depth only through its scale in the image: a 7×6 × 2 mm board
@@ -119,7 +119,7 @@ def board_pose_in_mirror(real_px: np.ndarray, virtual_px: np.ndarray, board: Boa
     from scipy.optimize import least_squares
 
     from lts360.geometry.mirror import reflect_points
-    from lts360.recon.camera_calibration import corner_outlier_limit
+    from lts360.recon.calibration.camera import corner_outlier_limit
 
     obj = board.object_points().astype(np.float64)
     real = np.asarray(real_px, dtype=np.float64).reshape(-1, 2)
@@ -198,7 +198,7 @@ def laser_line_points(image_on, image_off, image_board, board: BoardGeometry, K,
         Keep centres at least this many squares inside the printed squares' outline.
     line_model : bool
         Refine the detected line by fitting the image model of the band on the printed board
-        (:func:`lts360.recon.laser_line_model.fit_line_on_board`: the albedo under the band
+        (:func:`lts360.recon.calibration.laser_line_model.fit_line_on_board`: the albedo under the band
         and the blur taken into account), and return points along that line.  ``False``: the
         detected centres, moved onto their straight-line fit.  Measured on rendered paper-board
         laser shots with the true pose: the line at the board's centre within −10.5…+2.6 µm
@@ -252,7 +252,7 @@ def laser_line_points(image_on, image_off, image_board, board: BoardGeometry, K,
     points = rays * scale[:, None]
     uv = c.uv[inl]
     if line_model:
-        from lts360.recon.laser_line_model import fit_line_on_board
+        from lts360.recon.calibration.laser_line_model import fit_line_on_board
 
         # The detected line in board coordinates starts the fit of the image model.
         xb = ((points - t) @ R)[:, :2]
@@ -280,7 +280,7 @@ def fit_laser_plane(lines: list[LaserLine], *, min_poses: int = 2) -> LaserPlane
 
     The covariance (3×3) is of ``(a, b, d)`` with the normal perturbed as
     ``n' = normalise(n + a e1 + b e2)`` (``e1, e2`` the tangent basis of
-    :func:`lts360.recon.calibrate.tangent_basis`), from the residual variance and the points'
+    :func:`lts360.recon.calibration.from_images.tangent_basis`), from the residual variance and the points'
     spread — the input of the Monte Carlo study.
 
     Raises
@@ -289,7 +289,7 @@ def fit_laser_plane(lines: list[LaserLine], *, min_poses: int = 2) -> LaserPlane
         Fewer than ``min_poses`` poses, or all points on one line (the plane is not determined,
         as paper §4.3 warns).
     """
-    from lts360.recon.uncertainty import plane_covariance
+    from lts360.recon.calibration.uncertainty import plane_covariance
 
     if len(lines) < min_poses:
         raise ValueError(f"laser calibration: {len(lines)} pose(s) with a laser line, need at "

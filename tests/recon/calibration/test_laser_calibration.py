@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from lts360.recon.calibrate import measurement_frame_from_mirrors
-from lts360.recon.calibration import calibration_from_frame_truth
-from lts360.recon.laser_calibration import LaserLine, fit_laser_plane
+from lts360.recon.calibration.from_images import measurement_frame_from_mirrors
+from lts360.recon.calibration.model import calibration_from_frame_truth
+from lts360.recon.calibration.laser_plane import LaserLine, fit_laser_plane
 
 
 def _line(p0, direction, n_pts=50):
@@ -93,8 +93,8 @@ def test_board_pose_leaves_out_a_shifted_column():
     from scipy.spatial.transform import Rotation
 
     from lts360.geometry.camera import project_camera_points
-    from lts360.recon.camera_calibration import BoardGeometry
-    from lts360.recon.laser_calibration import board_pose
+    from lts360.recon.calibration.camera import BoardGeometry
+    from lts360.recon.calibration.laser_plane import board_pose
 
     geo = BoardGeometry((6, 5), 2.0)
     K = np.array([[1509.4, 0.0, 639.5], [0.0, 1509.4, 511.5], [0.0, 0.0, 1.0]])
@@ -143,8 +143,8 @@ def test_board_pose_in_mirror_fixes_the_depth_that_one_view_cannot():
     pytest.importorskip("cv2")
     from lts360.geometry.camera import project_camera_points
     from lts360.geometry.mirror import reflect_points
-    from lts360.recon.camera_calibration import BoardGeometry
-    from lts360.recon.laser_calibration import board_pose, board_pose_in_mirror
+    from lts360.recon.calibration.camera import BoardGeometry
+    from lts360.recon.calibration.laser_plane import board_pose, board_pose_in_mirror
     from lts360.scenes.rig_io import load_rig
 
     rig = load_rig("paper")
@@ -178,8 +178,8 @@ def test_board_pose_in_mirror_leaves_out_a_shifted_column():
     pytest.importorskip("cv2")
     from lts360.geometry.camera import project_camera_points
     from lts360.geometry.mirror import reflect_points
-    from lts360.recon.camera_calibration import BoardGeometry
-    from lts360.recon.laser_calibration import board_pose_in_mirror
+    from lts360.recon.calibration.camera import BoardGeometry
+    from lts360.recon.calibration.laser_plane import board_pose_in_mirror
     from lts360.scenes.rig_io import load_rig
 
     rig = load_rig("paper")
@@ -205,7 +205,7 @@ def test_a_board_posed_from_one_view_is_left_out_beside_stereo_poses():
     and said so; with fewer than two stereo poses every line is kept."""
     import dataclasses
 
-    from lts360.recon.calibrate import select_laser_lines
+    from lts360.recon.calibration.from_images import select_laser_lines
 
     n, a, b = _plane_basis([0.0, -0.64, 0.77])
     d = -120.0

@@ -1,4 +1,4 @@
-"""Plane perturbation, plane covariance and random calibrations (lts360.recon.uncertainty)."""
+"""Plane perturbation, plane covariance and random calibrations (lts360.recon.calibration.uncertainty)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from lts360.geometry.fit import fit_plane
-from lts360.recon.calibration import calibration_from_frame_truth
-from lts360.recon.uncertainty import (jackknife_covariance, perturb_plane, plane_covariance,
+from lts360.recon.calibration.model import calibration_from_frame_truth
+from lts360.recon.calibration.uncertainty import (jackknife_covariance, perturb_plane, plane_covariance,
                                       plane_offset_abd, sample_calibration, tangent_basis)
 
 unit = st.tuples(*[st.floats(-1, 1, allow_nan=False)] * 3).filter(
