@@ -13,7 +13,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from lts360.recon.calibration.camera import BoardGeometry, calibrate_camera
+from lts360.recon.calibration.board import BoardGeometry
+from lts360.recon.calibration.camera import calibrate_camera
 
 mi = pytest.importorskip("mitsuba", reason="rendering the calibration images needs Mitsuba 3")
 pytest.importorskip("cv2", reason="calibration needs OpenCV")

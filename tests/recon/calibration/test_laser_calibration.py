@@ -93,7 +93,7 @@ def test_board_pose_leaves_out_a_shifted_column():
     from scipy.spatial.transform import Rotation
 
     from lts360.geometry.camera import project_camera_points
-    from lts360.recon.calibration.camera import BoardGeometry
+    from lts360.recon.calibration.board import BoardGeometry
     from lts360.recon.calibration.laser_plane import board_pose
 
     geo = BoardGeometry((6, 5), 2.0)
@@ -143,7 +143,7 @@ def test_board_pose_in_mirror_fixes_the_depth_that_one_view_cannot():
     pytest.importorskip("cv2")
     from lts360.geometry.camera import project_camera_points
     from lts360.geometry.mirror import reflect_points
-    from lts360.recon.calibration.camera import BoardGeometry
+    from lts360.recon.calibration.board import BoardGeometry
     from lts360.recon.calibration.laser_plane import board_pose, board_pose_in_mirror
     from lts360.scenes.rig_io import load_rig
 
@@ -178,7 +178,7 @@ def test_board_pose_in_mirror_leaves_out_a_shifted_column():
     pytest.importorskip("cv2")
     from lts360.geometry.camera import project_camera_points
     from lts360.geometry.mirror import reflect_points
-    from lts360.recon.calibration.camera import BoardGeometry
+    from lts360.recon.calibration.board import BoardGeometry
     from lts360.recon.calibration.laser_plane import board_pose_in_mirror
     from lts360.scenes.rig_io import load_rig
 

@@ -15,7 +15,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from lts360.recon.calibration.camera import BoardGeometry
+from lts360.recon.calibration.board import BoardGeometry
 from lts360.recon.calibration.mirrors import detect_real_and_virtual, mirror_from_midpoints
 
 SPP = 64  # saddle-point corners need a cleaner image than SB (see the module docstring)

@@ -41,7 +41,7 @@ from scipy import ndimage
 from scipy.optimize import least_squares
 
 from lts360.geometry.camera import backproject_pixels, project_camera_points
-from lts360.recon.calibration.camera import BoardGeometry
+from lts360.recon.calibration.board import BoardGeometry
 
 __all__ = ["BoardCrop", "BoardFit", "HomographyFit", "board_crop", "dark_squares", "inside_squares",
            "refine_board_homography", "refine_board_pose",

@@ -40,7 +40,8 @@ from pathlib import Path
 import numpy as np
 
 from lts360.recon.calibration.model import Calibration, MirrorPlane, make_T_cam_meas
-from lts360.recon.calibration.camera import BoardGeometry, CameraCalibration, calibrate_camera
+from lts360.recon.calibration.board import BoardGeometry
+from lts360.recon.calibration.camera import CameraCalibration, calibrate_camera
 from lts360.recon.calibration.laser_plane import (LaserLine, LaserPlaneEstimate, board_pose,
                                             board_pose_in_mirror,
                                             fit_laser_plane, laser_line_points)

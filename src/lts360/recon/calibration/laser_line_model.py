@@ -37,7 +37,7 @@ from scipy import ndimage
 from scipy.optimize import least_squares
 
 from lts360.geometry.camera import backproject_pixels, project_camera_points
-from lts360.recon.calibration.camera import BoardGeometry
+from lts360.recon.calibration.board import BoardGeometry
 
 __all__ = ["BoardLine", "fit_line_on_board"]
 

@@ -25,7 +25,8 @@ import numpy as np
 
 from lts360.geometry.camera import backproject_pixels, project_camera_points
 from lts360.geometry.fit import fit_plane
-from lts360.recon.calibration.camera import BoardGeometry, detect_corners
+from lts360.recon.calibration.board import BoardGeometry
+from lts360.recon.calibration.camera import detect_corners
 from lts360.recon.triangulation.classic import steger_centres
 
 __all__ = ["LaserLine", "LaserPlaneEstimate", "board_pose", "board_pose_in_mirror",

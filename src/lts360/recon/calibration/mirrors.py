@@ -25,7 +25,8 @@ from scipy.optimize import least_squares
 
 from lts360.geometry.camera import project_camera_points
 from lts360.geometry.fit import fit_plane
-from lts360.recon.calibration.camera import BoardGeometry, _to_u8, corner_outlier_limit
+from lts360.recon.calibration.board import BoardGeometry
+from lts360.recon.calibration.camera import _to_u8, corner_outlier_limit
 
 __all__ = ["MirrorObservation", "MirrorEstimate", "detect_real_and_virtual", "mirror_from_midpoints",
            "refine_mirror", "robust_refine_mirror", "per_image_rms"]
