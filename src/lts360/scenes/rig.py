@@ -15,25 +15,11 @@ import numpy as np
 
 from lts360.geometry.camera import camera_center, look_at
 from lts360.geometry.mirror import mirror_matrix
+from lts360.scenes.checks import RigError, _check, _in_range
+from lts360.scenes.sensor import SensorModel
 
 __all__ = ["Camera", "LaserSheet", "Mirror", "Stage", "Rig", "RigDesign", "build_rig",
            "RigError"]
-
-
-class RigError(ValueError):
-    """A rig parameter is out of range or inconsistent; the message names the field."""
-
-
-def _check(cond: bool, field_name: str, message: str) -> None:
-    if not cond:
-        raise RigError(f"{field_name}: {message}")
-
-
-def _in_range(field_name: str, value, lo: float, hi: float, *, lo_open=False, unit="") -> None:
-    ok = isinstance(value, (int, float)) and math.isfinite(value) and \
-        (value > lo if lo_open else value >= lo) and value <= hi
-    bracket = "(" if lo_open else "["
-    _check(ok, field_name, f"must be in {bracket}{lo:g}, {hi:g}]{unit}, got {value!r}")
 
 
 def _vec(value, n: int = 3) -> np.ndarray:
@@ -291,10 +277,9 @@ class Rig:
     mirrors: tuple[Mirror, ...]
     stage: Stage
     design: "RigDesign | None" = None
-    sensor: object = None  # SensorModel; None → the default (the paper's camera)
+    sensor: SensorModel | None = None  # None → the default (the paper's camera)
 
     def __post_init__(self) -> None:
-        from lts360.scenes.sensor import SensorModel  # sensor.py imports this module
 
         if self.sensor is None:
             object.__setattr__(self, "sensor", SensorModel())
@@ -425,7 +410,6 @@ def build_rig(design: RigDesign, *, camera: dict | None = None, laser: dict | No
         stg = Stage(**(stage or {}))
     except TypeError as exc:  # unknown keyword in a table
         raise RigError(str(exc).replace("__init__() ", "")) from None
-    from lts360.scenes.sensor import SensorModel
 
     sens = SensorModel.from_dict(sensor or {})
     return Rig(name=name, camera=cam, laser=las, mirrors=_mirrors(design), stage=stg, design=design,

@@ -26,7 +26,7 @@ from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
-from lts360.scenes.rig import RigError, _check, _in_range
+from lts360.scenes.checks import RigError, _check, _in_range
 
 __all__ = ["SensorModel", "BIT_DEPTHS", "RigError"]  # RigError: what validation raises
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lts360.scenes.rig import RigError, _check, _in_range
+from lts360.scenes.checks import RigError, _check, _in_range
 
 __all__ = ["Chessboard"]
 
