@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 import lts360.scenes.objects.alu_pipe as alu
 from lts360.scenes.objects.base import Placement
-from lts360.scenes.objects.registry import build_object, parse_spec
+from lts360.scenes.objects.catalog import build_object, parse_spec
 from meshcheck import face_points, outermost_hit_radius, radial_error  # noqa: E402
 
 P = alu.AluPipeParams

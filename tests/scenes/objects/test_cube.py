@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 import lts360.scenes.objects.cube as cu
 from lts360.scenes.objects.base import Placement
-from lts360.scenes.objects.registry import build_object, parse_spec
+from lts360.scenes.objects.catalog import build_object, parse_spec
 from meshcheck import face_points, outermost_hit_radius, radial_error  # noqa: E402
 
 P = cu.CubeParams

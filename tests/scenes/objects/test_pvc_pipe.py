@@ -13,7 +13,7 @@ from scipy.special import erf, ive
 
 import lts360.scenes.objects.pvc_pipe as pvc
 from lts360.scenes.objects.base import Placement
-from lts360.scenes.objects.registry import build_object, parse_spec
+from lts360.scenes.objects.catalog import build_object, parse_spec
 from meshcheck import face_points, outermost_hit_radius, radial_error  # noqa: E402
 
 P = pvc.PvcPipeParams

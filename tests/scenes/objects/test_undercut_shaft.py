@@ -14,7 +14,7 @@ from scipy.integrate import quad
 
 import lts360.scenes.objects.undercut_shaft as us
 from lts360.scenes.objects.base import Placement
-from lts360.scenes.objects.registry import build_object, parse_spec
+from lts360.scenes.objects.catalog import build_object, parse_spec
 from meshcheck import face_points, outermost_hit_radius, radial_error  # noqa: E402
 
 P = us.UndercutShaftParams

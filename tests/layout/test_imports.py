@@ -1,0 +1,114 @@
+"""The package's import graph: no circles, and the layers DESIGN.md names.
+
+Built from the source (every ``import``, at module level or inside a function), so a lazy
+import cannot hide a circle.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import lts360
+
+SRC = Path(lts360.__file__).parent
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for p in SRC.rglob("*.py"):
+        parts = ("lts360",) + p.relative_to(SRC).with_suffix("").parts
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = p
+    return out
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Module → the lts360 modules it imports (``from pkg import submodule`` names the submodule)."""
+    mods = _modules()
+    graph = {m: set() for m in mods}
+    for m, p in mods.items():
+        for node in ast.walk(ast.parse(p.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                subs = {f"{node.module}.{a.name}" for a in node.names} & mods.keys()
+                graph[m] |= subs
+                if len(subs) < len(node.names) and node.module in mods:
+                    graph[m].add(node.module)
+            elif isinstance(node, ast.Import):
+                graph[m] |= {a.name for a in node.names} & mods.keys()
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components of more than one module (Tarjan, iterative)."""
+    index, low, on, stack, out = {}, {}, set(), [], []
+    for root in graph:
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on.add(root)
+        while work:
+            v, it = work[-1]
+            w = next(it, None)
+            if w is not None:
+                if w not in index:
+                    index[w] = low[w] = len(index)
+                    stack.append(w)
+                    on.add(w)
+                    work.append((w, iter(sorted(graph[w]))))
+                elif w in on:
+                    low[v] = min(low[v], index[w])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                comp = []
+                while True:
+                    w = stack.pop()
+                    on.discard(w)
+                    comp.append(w)
+                    if w == v:
+                        break
+                if len(comp) > 1:
+                    out.append(sorted(comp))
+    return out
+
+
+def test_cycle_finder_finds_a_planted_circle():
+    g = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
+    assert cycles(g) == [["a", "b", "c"]]
+    assert cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_no_import_circles():
+    assert cycles(import_graph()) == []
+
+
+def _imports_of(prefix: str) -> set[str]:
+    g = import_graph()
+    return {t for m, ts in g.items() if m == prefix or m.startswith(prefix + ".") for t in ts}
+
+
+def test_recon_reads_images_and_calibrations_only():
+    """recon runs on real images: it never imports the simulator, the scenes or a study."""
+    bad = {t for t in _imports_of("lts360.recon")
+           if t.split(".")[1] in ("simulator", "scenes", "experiments", "cli")}
+    assert bad == set()
+
+
+def test_triangulation_does_not_import_the_calibration_procedures():
+    bad = {t for t in _imports_of("lts360.recon.triangulation")
+           if t.startswith("lts360.recon.calibration") and t not in
+           ("lts360.recon.calibration", "lts360.recon.calibration.model")}
+    assert bad == set()
+
+
+def test_geometry_and_scenes_do_not_import_the_layers_above():
+    for layer in ("lts360.geometry", "lts360.scenes"):
+        bad = {t for t in _imports_of(layer)
+               if t.split(".")[1] in ("simulator", "recon", "experiments", "cli")}
+        assert bad == set(), layer
