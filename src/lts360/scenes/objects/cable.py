@@ -44,7 +44,7 @@ from scipy.optimize import brentq
 from lts360.scenes.materials import get_material
 from lts360.scenes.objects._params import check_range
 from lts360.scenes.objects.base import Placement, SceneObject
-from lts360.scenes.objects.grooved_shaft import helical_resolution, helical_star_mesh
+from lts360.scenes.objects.mesher import helical_resolution, helical_star_mesh
 from lts360.scenes.objects.registry import ObjectType, canonical_spec, register
 
 __all__ = ["CableParams", "StrandSection"]
@@ -56,7 +56,7 @@ SCANS = {"cable": (39, 0.34), "cable-6": (40, 0.34), "cable-8": (39, 0.34)}
 #: Number of layers (centre wire included) of each allowed strand count.
 LAYERS = {7: 2, 19: 3, 37: 4}
 #: Share of ``mesh_tolerance_mm`` given to the second-order error bound of
-#: :func:`~lts360.scenes.objects.grooved_shaft.helical_resolution`; the rest covers
+#: :func:`~lts360.scenes.objects.mesher.helical_resolution`; the rest covers
 #: higher-order terms.
 _SAFETY = 0.9
 #: Dense samples of one wire's profile, to measure its curvature.
