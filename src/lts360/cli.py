@@ -267,7 +267,7 @@ def _board_arg(text: str, name: str):
 
 
 def _cmd_calibrate(args) -> int:
-    from lts360.experiments.calibrate import format_report, run_calibrate
+    from lts360.experiments.calibration_run import format_report, run_calibrate
 
     if args.seed < 0:
         raise UsageError(f"--seed: must be >= 0, got {args.seed}")

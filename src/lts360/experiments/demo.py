@@ -140,7 +140,7 @@ def run_demo(out: Path, *, radius_mm: float = 10.0, rig_name: str = "paper", ren
 def _paper(root: Path, *, rig_name: str, seed: int, trials: int, echo) -> dict:
     """The paper end to end: calibrate from rendered chessboard images (realistic noise), then
     the plug-gauge evaluation of §4.5 with that calibration and the §4.4 compensation."""
-    from lts360.experiments.calibrate import format_report, run_calibrate
+    from lts360.experiments.calibration_run import format_report, run_calibrate
     from lts360.experiments.gauge_study import format_gauge_table, run_plug_gauge_study
 
     t = time.perf_counter()

@@ -256,7 +256,7 @@ def ensure_calibration(out: Path, calibration=None, *, rig: str = "paper", noise
     rendered chessboard images into ``out/calibration/`` (kept for the next run); with
     ``compensate``, a copy with the §4.4 view offsets from ``compensation_shots`` shots of the
     gauge (``out/calibration-compensated[-Kshots].json``)."""
-    from lts360.experiments.calibrate import run_calibrate
+    from lts360.experiments.calibration_run import run_calibrate
 
     if calibration is None:
         cal_dir = out / "calibration"
@@ -278,8 +278,6 @@ def run_plug_gauge_study(out_dir, *, trials: int = 10, seed: int = 0, calibratio
                          dask_address: str | None = None, calibrate_options: dict | None = None,
                          compensation_shots: int = 1, say=print) -> dict:
     """Calibrate (unless ``calibration``), compensate, measure ``trials`` placements, tabulate."""
-    from lts360.experiments.calibrate import run_calibrate
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     calibration = ensure_calibration(out, calibration, rig=rig, noise=noise, seed=seed, spp=spp,

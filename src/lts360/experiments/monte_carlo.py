@@ -127,7 +127,6 @@ def dorsch_speckle_limit_um(rig) -> dict:
 @functools.lru_cache(maxsize=16)
 def _placement(frame_dir: str):
     """Stored radiance + the frame's rig (read once per process)."""
-    from lts360.scenes.rig_io import load_rig
     from lts360.simulator.io import read_exr
 
     ch = read_exr(Path(frame_dir) / "radiance.exr")

@@ -32,7 +32,7 @@ def calibrated(tmp_path_factory):
     if "llvm_ad_mono" not in mi.variants():
         pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
     mi.set_variant("llvm_ad_mono")
-    from lts360.experiments.calibrate import run_calibrate
+    from lts360.experiments.calibration_run import run_calibrate
     from lts360.scenes.rig_io import rig_from_dict, rig_to_toml
     from lts360.scenes.targets import Chessboard
 
@@ -94,7 +94,7 @@ def test_estimates_are_near_the_truth(calibrated):
 
 def test_the_images_folder_alone_reproduces_the_calibration(calibrated, tmp_path):
     """`--images DIR`: nothing rendered, the same result from the same files."""
-    from lts360.experiments.calibrate import run_calibrate
+    from lts360.experiments.calibration_run import run_calibrate
     from lts360.recon.calibration.model import load_calibration
 
     out, _ = calibrated
@@ -112,7 +112,7 @@ def test_a_camera_model_round_on_the_same_images(calibrated, tmp_path):
     """`--camera-model 1` through the whole pipeline: the camera boards' corners from the
     image model of their own squares fit Zhang's model far more tightly than SB's, and the
     calibration stays as near the truth as the tolerances above ask."""
-    from lts360.experiments.calibrate import run_calibrate
+    from lts360.experiments.calibration_run import run_calibrate
     from lts360.recon.calibration.model import load_calibration
 
     out, sb_report = calibrated

@@ -24,7 +24,6 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from lts360.geometry.camera import project_camera_points
-from lts360.geometry.fit import fit_plane
 from lts360.recon.calibration.board import BoardGeometry
 from lts360.recon.calibration.camera import _to_u8, corner_outlier_limit
 
