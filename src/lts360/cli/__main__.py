@@ -1,0 +1,7 @@
+"""``python -m lts360.cli``."""
+
+import sys
+
+from lts360.cli import main
+
+sys.exit(main())

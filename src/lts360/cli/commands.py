@@ -1,0 +1,262 @@
+"""The single-job commands: objects, object, rig, render, measure, compensate, score, calibrate."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from lts360.cli.usage import UsageError, _progress, _set_variant
+
+
+def cmd_objects(args) -> int:
+    from lts360.scenes.objects import object_types
+
+    for name, entry in object_types().items():
+        print(f"{name:16s} {entry.description}")
+        for field, default, alias in entry.parameters():
+            al = f" ({alias})" if alias else ""
+            print(f"    {field + al:32s} = {default}")
+    print("placement (every object): x_mm (x), y_mm (y), tilt_deg, tilt_azimuth_deg")
+    return 0
+
+def _atomic_export(mesh, path: Path) -> None:
+    path = Path(path)
+    if path.suffix.lower() not in (".ply", ".stl", ".obj", ".off", ".glb"):
+        raise UsageError(f"--out: unsupported mesh format {path.suffix!r}; use .ply, .stl, .obj, .off or .glb")
+    if not path.parent.exists():
+        raise UsageError(f"--out: directory {str(path.parent)!r} does not exist")
+    tmp = path.with_name(f".{path.name}.tmp{path.suffix}")
+    mesh.export(tmp)
+    tmp.replace(path)
+
+def cmd_object(args) -> int:
+    from lts360.scenes.objects import build_object
+
+    obj = build_object(args.spec)
+    mesh = obj.mesh_world()
+    _atomic_export(mesh, Path(args.out))
+    print(f"{obj.name}: {len(mesh.vertices)} vertices, {len(mesh.faces)} faces, "
+          f"watertight={mesh.is_watertight}, volume={mesh.volume:.3f} mm³, "
+          f"material={obj.material.name}")
+    print(f"spec: {obj.spec}")
+    print(f"wrote {args.out}")
+    return 0
+
+def cmd_rig(args) -> int:
+    from lts360.experiments.report import format_coverage, format_rig
+    from lts360.scenes.coverage import coverage
+    from lts360.scenes.rig_io import load_rig
+
+    rig = load_rig(args.rig)
+    print(format_rig(rig))
+    if args.coverage:
+        if not args.radius_mm > 0:
+            raise UsageError(f"--radius-mm: must be > 0, got {args.radius_mm}")
+        cov = coverage(rig, args.radius_mm, theta_step_deg=args.theta_step_deg,
+                       max_incidence_deg=args.max_incidence_deg)
+        print(format_coverage(rig, cov))
+    return 0
+
+def cmd_render(args) -> int:
+    import json
+
+    from lts360.scenes.objects import build_object
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.frame import simulate_frame, write_frame
+
+    if args.spp < 1 or args.spp > 4096:
+        raise UsageError(f"--spp: must be in [1, 4096], got {args.spp}")
+    if args.seed < 0:
+        raise UsageError(f"--seed: must be >= 0, got {args.seed}")
+    if not 0 < args.scale <= 1:
+        raise UsageError(f"--scale: must be in (0, 1], got {args.scale}")
+    if not 0 < args.exposure_fraction <= 1:
+        raise UsageError(f"--exposure-fraction: must be in (0, 1], got {args.exposure_fraction}")
+    if args.exposure_us is not None and not 0 < args.exposure_us <= 1e7:
+        raise UsageError(f"--exposure-us: must be in (0, 1e7], got {args.exposure_us}")
+    if args.sections < 1 or args.sections > 10000:
+        raise UsageError(f"--sections: must be in [1, 10000], got {args.sections}")
+    if args.sections > 1 and not args.pitch_mm > 0:
+        raise UsageError(f"--pitch-mm: must be > 0 for a scan, got {args.pitch_mm}")
+    rig = load_rig(args.rig)
+    obj = build_object(args.object)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out: {str(out)!r} exists and is not a directory")
+    variant = _set_variant(args.variant)
+    kw = dict(spp=args.spp, seed=args.seed, noise=args.noise, laser_on=args.laser == "on",
+              ambient=args.ambient, scale=args.scale, max_bounces=args.max_bounces,
+              thin_lens=not args.pinhole, background_z_mm=args.background_z_mm,
+              exposure_time_s=None if args.exposure_us is None else args.exposure_us * 1e-6,
+              exposure_fraction=args.exposure_fraction)
+    if args.sections == 1:
+        frame = simulate_frame(rig, obj, z_mm=args.z_mm, **kw)
+        write_frame(out, frame)
+        print(f"{obj.name} at z = {args.z_mm:g} mm: rendered in {frame.render.seconds:.2f} s "
+              f"({variant}, {args.spp} spp), exposure {frame.exposure_time_s * 1e6:.0f} µs, "
+              f"max DN {int(frame.image.max())} -> {out}/")
+        return 0
+    import shutil
+
+    tmp = out.with_name(f".{out.name}.partial")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    zs = args.z_mm + (np.arange(args.sections) - (args.sections - 1) / 2.0) * args.pitch_mm
+    sections = []
+    for k, z in enumerate(_progress(zs, "sections")):
+        frame = simulate_frame(rig, obj, z_mm=float(z), seed=args.seed + k,
+                               **{key: v for key, v in kw.items() if key != "seed"})
+        write_frame(tmp / f"section_{k:04d}", frame)
+        sections.append({"dir": f"section_{k:04d}", "z_mm": float(z), "seed": args.seed + k})
+    (tmp / "scan.json").write_text(json.dumps({"object": obj.spec, "pitch_mm": args.pitch_mm,
+                                               "sections": sections}, indent=2))
+    shutil.rmtree(out, ignore_errors=True)
+    tmp.replace(out)
+    print(f"{obj.name}: {args.sections} sections, pitch {args.pitch_mm:g} mm -> {out}/")
+    return 0
+
+def cmd_measure(args) -> int:
+    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.triangulation.cloud import write_cloud
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.measure import collect_sections, measure_sections
+
+    if not args.radius_mm > 0 or not args.band_mm > 0 or args.band_mm >= args.radius_mm:
+        raise UsageError(f"--radius-mm/--band-mm: need 0 < band < radius, got "
+                         f"{args.radius_mm}, {args.band_mm}")
+    cal = load_calibration(args.calibration)
+    if args.compensate and not any(np.any(v) for v in cal.view_offsets_mm.values()):
+        raise UsageError(f"--compensate: {args.calibration} has no view offsets (paper §4.4); "
+                         f"make them with `lts360 compensate`")
+    grid = CylGrid.from_ranges((args.radius_mm - args.band_mm, args.radius_mm + args.band_mm),
+                               theta_step_deg=args.theta_step_deg, r_step_mm=args.r_step_mm)
+    sections = collect_sections(args.inputs, pitch_mm=args.pitch_mm)
+    out = Path(args.out)
+    if not out.parent.exists():
+        raise UsageError(f"--out: directory {str(out.parent)!r} does not exist")
+    t0 = __import__("time").perf_counter()
+    cloud = measure_sections(sections, cal, grid, peak=args.peak, compensate=args.compensate,
+                             backend=args.backend, method=args.method,
+                             progress=(lambda it: _progress(it, "sections")) if len(sections) > 1
+                             else None)
+    dt = __import__("time").perf_counter() - t0
+    write_cloud(out, cloud)
+    valid = cloud.valid
+    what = f"peak {args.peak}" if args.method == "inverse" else "classic (Steger 2-D)"
+    print(f"{len(sections)} section(s), grid {grid.n_theta} θ × {grid.n_r} r, {what}: "
+          f"{int(valid.sum())} valid points of {len(cloud)} θ samples in {dt:.2f} s -> {out}")
+    return 0
+
+def cmd_compensate(args) -> int:
+    import dataclasses
+
+    from lts360.recon.calibration.model import load_calibration, save_calibration
+    from lts360.recon.calibration.compensation import joint_view_offsets
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.inverse import inverse_triangulate
+    from lts360.recon.triangulation.measure import collect_sections, read_image
+
+    if not args.radius_mm > 0 or not args.band_mm > 0 or args.band_mm >= args.radius_mm:
+        raise UsageError(f"--radius-mm/--band-mm: need 0 < band < radius, got "
+                         f"{args.radius_mm}, {args.band_mm}")
+    out = Path(args.out)
+    if not out.parent.exists():
+        raise UsageError(f"--out: directory {str(out.parent)!r} does not exist")
+    cal = load_calibration(args.calibration)
+    grid = CylGrid.from_ranges((args.radius_mm - args.band_mm, args.radius_mm + args.band_mm),
+                               theta_step_deg=args.theta_step_deg, r_step_mm=args.r_step_mm)
+    sections = collect_sections(args.inputs, pitch_mm=0.0)
+    results = [inverse_triangulate(read_image(s.image_path), cal, grid, peak=args.peak)
+               for s in sections]
+    # The mirror views are moved onto the direct one, as in the paper.
+    offsets = joint_view_offsets(results)
+    save_calibration(out, dataclasses.replace(cal, view_offsets_mm=offsets))
+    print(f"§4.4 offsets from {len(results)} reference shot(s), one circle each, the views "
+          f"shared: " + ", ".join(f"{k} ({1e3 * v[0]:+.1f}, {1e3 * v[1]:+.1f}) µm"
+                                  for k, v in sorted(offsets.items())) + f" -> {out}")
+    return 0
+
+def cmd_score(args) -> int:
+
+    from lts360.experiments.score import load_rig_truth, load_truth, score_cloud
+    from lts360.recon.triangulation.cloud import read_cloud
+    from lts360.simulator.io import write_json
+
+    cloud = read_cloud(args.cloud)
+    obj, _ = load_truth(args.truth)
+    metrics = score_cloud(cloud, obj, rig_truth=load_rig_truth(args.truth))
+    out = Path(args.out)
+    if not out.parent.exists():
+        raise UsageError(f"--out: directory {str(out.parent)!r} does not exist")
+    write_json(out, metrics)
+    fmt = lambda v: "—" if v is None else f"{v * 1000:.2f} µm"  # noqa: E731
+    print(f"{obj.name}: {metrics['n_points']} points, coverage {metrics['coverage_deg']:.1f}°, "
+          f"truth {metrics['truth']}")
+    print(f"  rms {fmt(metrics['rms_mm'])}, mean {fmt(metrics['mean_mm'])}, "
+          f"max |e| {fmt(metrics['max_abs_mm'])}, p95 {fmt(metrics['p95_mm'])}; normal distance "
+          f"to the mesh: rms {fmt(metrics['mesh_distance']['rms_mm'])}")
+    if metrics.get("n_spurious"):
+        print(f"  {metrics['n_spurious']} spurious points where the true surface is hidden or "
+              f"unlit (rms {fmt(metrics['spurious']['rms_mm'])}): counted as missing coverage")
+    for view, row in metrics["views"].items():
+        print(f"  {view:10s} n={row['n']:6d} rms {fmt(row['rms_mm'])} mean {fmt(row['mean_mm'])} "
+              f"coverage {row['coverage_deg']:.1f}°")
+    if "radius_bias_mm" in metrics:
+        print(f"  fitted diameter {metrics['fitted_diameter_mm']:.5f} mm, radius bias "
+              f"{fmt(metrics['radius_bias_mm'])}")
+    print(f"wrote {out}")
+    return 0
+
+def _board_arg(text: str, name: str):
+    """``SXxSYxMM`` (squares along x and y, square side in mm) → Chessboard."""
+    from lts360.scenes.targets import Chessboard
+
+    try:
+        sx, sy, mm = text.lower().split("x")
+        sx, sy, mm = int(sx), int(sy), float(mm)
+    except ValueError:
+        raise UsageError(f"{name}: expected SQUARESxSQUARESxSIDE_MM such as 7x6x2, got {text!r}") \
+            from None
+    return Chessboard(squares_x=sx, squares_y=sy, square_mm=mm, margin_mm=max(1.0, mm / 2))
+
+def cmd_calibrate(args) -> int:
+    from lts360.experiments.calibration_run import format_report, run_calibrate
+
+    if args.seed < 0:
+        raise UsageError(f"--seed: must be >= 0, got {args.seed}")
+    if not 1 <= args.spp <= 4096:
+        raise UsageError(f"--spp: must be in [1, 4096], got {args.spp}")
+    if args.target_spp is not None and not 1 <= args.target_spp <= 4096:
+        raise UsageError(f"--target-spp: must be in [1, 4096], got {args.target_spp}")
+    if args.f_number is not None and not 0.5 <= args.f_number <= 64:
+        raise UsageError(f"--f-number: must be in [0.5, 64], got {args.f_number}")
+    if args.camera_model is not None and not 0 <= args.camera_model <= 5:
+        raise UsageError(f"--camera-model: must be in [0, 5], got {args.camera_model}")
+    if args.camera_poses < 4 or args.mirror_poses < 1 or args.laser_poses < 2:
+        raise UsageError("--camera-poses >= 4, --mirror-poses >= 1 and --laser-poses >= 2 needed, "
+                         f"got {args.camera_poses}, {args.mirror_poses}, {args.laser_poses}")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out: {str(out)!r} exists and is not a directory")
+    if args.images is not None:
+        if not Path(args.images).is_dir():
+            raise UsageError(f"--images: {args.images!r} is not a directory")
+    else:
+        from lts360.scenes.rig_io import load_rig
+
+        load_rig(args.rig)  # fail early on a bad rig
+        _set_variant(args.variant)
+    board = _board_arg(args.board, "--board")
+    camera_board = None if args.camera_board is None else _board_arg(args.camera_board,
+                                                                     "--camera-board")
+    report = run_calibrate(out, rig_name=args.rig, noise=args.noise, seed=args.seed,
+                           images_dir=args.images, spp=args.spp, n_camera=args.camera_poses,
+                           n_mirror=args.mirror_poses, n_laser=args.laser_poses, board=board,
+                           camera_board=camera_board, tangential=args.tangential,
+                           thin_lens=not args.pinhole, f_number=args.f_number,
+                           laser_in_mirror=not args.laser_direct, target_spp=args.target_spp,
+                           camera_model_rounds=args.camera_model)
+    print(format_report(report))
+    print(f"wrote {out}/calibration.json, report.json, fig8.png")
+    return 0

@@ -1,0 +1,224 @@
+"""The argument parser of every command (each sub-command's ``func`` is its handler)."""
+
+from __future__ import annotations
+
+import argparse
+
+from lts360.cli.commands import (
+    cmd_calibrate, cmd_compensate, cmd_measure, cmd_object, cmd_objects, cmd_render, cmd_rig,
+    cmd_score)
+from lts360.cli.studies import (
+    cmd_demo, cmd_study_algorithms, cmd_study_design_space, cmd_study_examples,
+    cmd_study_monte_carlo, cmd_study_plug_gauge)
+from lts360.cli.usage import _Parser
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="lts360", description="360° laser triangulation with mirrors: simulation "
+                "and reconstruction testbed.")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+
+    s = sub.add_parser("objects", help="list every object with its parameters and defaults")
+    s.set_defaults(func=cmd_objects)
+
+    s = sub.add_parser("object", help="write an object's ground-truth mesh (world frame, mm)")
+    s.add_argument("spec", help="NAME[:key=value,...], e.g. plug-gauge:d=19.9987,x=0.2,tilt_deg=1")
+    s.add_argument("--out", required=True, help="output mesh file (.ply, .stl, .obj, .off, .glb)")
+    s.set_defaults(func=cmd_object)
+
+    s = sub.add_parser("rig", help="describe a rig and its coverage")
+    s.add_argument("rig", nargs="?", default="paper", help="preset name (paper) or TOML file")
+    s.add_argument("--coverage", action="store_true", help="print per-view θ windows and total coverage")
+    s.add_argument("--radius-mm", type=float, default=10.0, help="section radius (default 10)")
+    s.add_argument("--theta-step-deg", type=float, default=0.1, help="θ sampling (default 0.1°)")
+    s.add_argument("--max-incidence-deg", type=float, default=80.0,
+                   help="largest usable incidence angle of camera and laser (default 80°)")
+    s.set_defaults(func=cmd_rig)
+
+    s = sub.add_parser("render", help="render a frame (or a scan) of an object in the rig")
+    s.add_argument("--object", required=True, help="object SPEC, e.g. plug-gauge or cable-8:x=0.3")
+    s.add_argument("--out", required=True, help="output directory")
+    s.add_argument("--rig", default="paper", help="preset name or TOML file (default paper)")
+    s.add_argument("--z-mm", type=float, default=0.0, help="section height on the object (mm)")
+    s.add_argument("--noise", choices=("none", "realistic"), default="none")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--spp", type=int, default=16, help="samples per pixel (default 16)")
+    s.add_argument("--variant", default=None,
+                   help="Mitsuba variant: llvm_ad_mono (default), cuda_ad_mono, scalar_rgb, ...")
+    s.add_argument("--laser", choices=("on", "off"), default="on")
+    s.add_argument("--ambient", choices=("off", "dim", "bright"), default="off")
+    s.add_argument("--scale", type=float, default=1.0, help="image scale in (0, 1]")
+    s.add_argument("--max-bounces", type=int, choices=(0, 1, 2, 3), default=2,
+                   help="mirror reflections followed on camera and laser paths (default 2)")
+    s.add_argument("--pinhole", action="store_true", help="pinhole instead of the thin lens")
+    s.add_argument("--exposure-us", type=float, default=None,
+                   help="fixed exposure time (default: auto-exposure)")
+    s.add_argument("--exposure-fraction", type=float, default=0.8,
+                   help="auto-exposure target: brightest stripe pixels at this fraction of full scale")
+    s.add_argument("--background-z-mm", type=float, default=None,
+                   help="add a matte black base plate at this height (default: none)")
+    s.add_argument("--sections", type=int, default=1, help="render a scan of N sections")
+    s.add_argument("--pitch-mm", type=float, default=0.0, help="stage pitch of a scan (mm)")
+    s.set_defaults(func=cmd_render)
+
+    s = sub.add_parser("measure", help="inverse triangulation of frames, scans or images")
+    s.add_argument("inputs", nargs="+", help="frame directories, scan directories or image files")
+    s.add_argument("--calibration", required=True,
+                   help="calibration.json, or a rendered frame's frame.json (the true rig)")
+    s.add_argument("--out", required=True, help="cloud.ply")
+    s.add_argument("--method", choices=("inverse", "classic"), default="inverse",
+                   help="inverse triangulation (paper §3.2) or the classical image-space baseline")
+    s.add_argument("--peak", choices=("centroid", "gauss", "steger"), default="centroid")
+    s.add_argument("--theta-step-deg", type=float, default=0.1)
+    s.add_argument("--r-step-mm", type=float, default=0.005)
+    s.add_argument("--radius-mm", type=float, default=10.0, help="nominal radius (default 10)")
+    s.add_argument("--band-mm", type=float, default=2.0, help="radial search band ± (default 2)")
+    s.add_argument("--pitch-mm", type=float, default=None, help="stage pitch for bare images")
+    s.add_argument("--compensate", action="store_true",
+                   help="apply the calibration's residual compensation (paper §4.4)")
+    s.add_argument("--backend", choices=("auto", "numpy", "llvm", "cuda"), default="auto",
+                   help="auto: the Dr.Jit kernel for the centroid, numpy otherwise")
+    s.set_defaults(func=cmd_measure)
+
+    s = sub.add_parser("compensate", help="residual compensation (paper §4.4): the mirror "
+                       "views' offsets from images of a round reference, into a calibration")
+    s.add_argument("inputs", nargs="+", help="frame directories, scan directories or image "
+                   "files of one round reference section (several: shots fitted together)")
+    s.add_argument("--calibration", required=True, help="calibration.json to compensate")
+    s.add_argument("--out", required=True, help="the compensated calibration.json")
+    s.add_argument("--peak", choices=("centroid", "gauss", "steger"), default="centroid")
+    s.add_argument("--theta-step-deg", type=float, default=0.1)
+    s.add_argument("--r-step-mm", type=float, default=0.005)
+    s.add_argument("--radius-mm", type=float, default=10.0,
+                   help="the reference's nominal radius (default 10)")
+    s.add_argument("--band-mm", type=float, default=1.0, help="radial search band ± (default 1)")
+    s.set_defaults(func=cmd_compensate)
+
+    s = sub.add_parser("score", help="score a measured cloud against the truth of rendered frames")
+    s.add_argument("cloud", help="cloud.ply written by `lts360 measure`")
+    s.add_argument("--truth", required=True, help="frame or scan directory written by `lts360 render`")
+    s.add_argument("--out", required=True, help="metrics.json")
+    s.set_defaults(func=cmd_score)
+
+    s = sub.add_parser("calibrate", help="calibrate camera, mirrors and laser plane from "
+                       "chessboard images (rendered, or yours with --images)")
+    s.add_argument("--out", required=True, help="output directory (calibration.json, report.json, "
+                   "fig8.png, images/)")
+    s.add_argument("--rig", default="paper", help="rig to render: 'paper' or a TOML file")
+    s.add_argument("--noise", choices=("none", "realistic"), default="none")
+    s.add_argument("--seed", type=int, default=0, help="seeds the poses, the renderer and the noise")
+    s.add_argument("--images", default=None, help="a folder of real images with manifest.json: "
+                   "nothing is rendered")
+    s.add_argument("--spp", type=int, default=64, help="samples per pixel of the rendered images")
+    s.add_argument("--target-spp", type=int, default=None, help="samples per pixel of the "
+                   "mirror and laser shots (default: --spp; their small board's defocused "
+                   "edges are where render noise counts)")
+    s.add_argument("--camera-poses", type=int, default=30)
+    s.add_argument("--camera-model", type=int, default=None, metavar="ROUNDS",
+                   help="rounds of Zhang's method on the camera boards' corners from their "
+                   "image model (default 0: on the detected corners)")
+    s.add_argument("--mirror-poses", type=int, default=6, help="per mirror")
+    s.add_argument("--laser-poses", type=int, default=6)
+    s.add_argument("--laser-direct", action="store_true", help="laser boards seen directly only "
+                   "(pose from PnP) instead of directly and in a mirror (pose from both views)")
+    s.add_argument("--board", default="7x6x2", help="mirror/laser board: squares x, squares y, "
+                   "side mm (paper: 7x6x2)")
+    s.add_argument("--camera-board", default=None, help="camera board (default 9x7x8)")
+    s.add_argument("--tangential", action="store_true", help="estimate the tangential "
+                   "distortion p1, p2 as well (default: k1, k2 only)")
+    s.add_argument("--pinhole", action="store_true", help="render the images without depth of "
+                   "field (the limit of a fully stopped-down lens)")
+    s.add_argument("--f-number", type=float, default=None, help="aperture of the calibration "
+                   "images (default: the rig's; stopping down sharpens the small boards)")
+    s.add_argument("--variant", default=None, help="Mitsuba variant (default llvm_ad_mono)")
+    s.set_defaults(func=cmd_calibrate)
+
+    s = sub.add_parser("study", help="the studies: plug-gauge, examples, design-space, "
+                       "monte-carlo, algorithms")
+    studies = s.add_subparsers(dest="study", metavar="STUDY", parser_class=_Parser)
+    studies.required = True
+
+    def study_parser(name, help_text):
+        q = studies.add_parser(name, help=help_text)
+        q.add_argument("--out", required=True, help="output directory (results, figures, README)")
+        q.add_argument("--seed", type=int, default=0)
+        q.add_argument("--workers", type=int, default=None, help="local processes")
+        q.add_argument("--dask", default=None, metavar="ADDRESS",
+                       help="run the trials on a Dask distributed scheduler")
+        q.add_argument("--variant", default=None, help="Mitsuba variant (default llvm_ad_mono)")
+        return q
+
+    q = study_parser("plug-gauge", "paper §4.5: the gauge placed N times, measured with an "
+                     "estimated calibration; the paper's table beside ours")
+    q.add_argument("--trials", type=int, default=10)
+    q.add_argument("--calibration", default=None, help="calibration.json (default: calibrate "
+                   "from rendered images into OUT/calibration/)")
+    q.add_argument("--noise", choices=("none", "realistic"), default="realistic")
+    q.add_argument("--spp", type=int, default=16)
+    q.add_argument("--rig", default="paper", help="rig to render: 'paper' or a TOML file (the "
+                   "one the calibration is of)")
+    q.add_argument("--compensation-shots", type=int, default=1, metavar="K",
+                   help="images of the gauge (turned between them) the §4.4 compensation is "
+                   "fitted to (default 1, as the paper)")
+    q.set_defaults(func=cmd_study_plug_gauge)
+
+    q = study_parser("monte-carlo", "GUM Supplement 1 Monte Carlo of the gauge radius, GUM "
+                     "budget, sensitivity ranking, speckle limit")
+    q.add_argument("--calibration", default=None, help="calibration.json with uncertainties "
+                   "(default: calibrate from rendered images into OUT/calibration/)")
+    q.add_argument("--trials", type=int, default=1000, help="M for the fixed-M procedure")
+    q.add_argument("--adaptive", action="store_true", help="JCGM 101 §7.9 adaptive procedure")
+    q.add_argument("--digits", type=int, default=2, help="significant digits of u(y) the "
+                   "adaptive procedure must stabilise")
+    q.add_argument("--batch", type=int, default=100)
+    q.add_argument("--sensitivity-trials", type=int, default=50,
+                   help="trials per input in the one-at-a-time runs")
+    q.add_argument("--placements", type=int, default=8, help="rendered gauge placements")
+    q.add_argument("--no-compensate", action="store_true", help="no §4.4 compensation")
+    q.add_argument("--compensation-shots", type=int, default=1, metavar="K",
+                   help="images of the reference placement each §4.4 compensation is fitted "
+                   "to (default 1, as the paper)")
+    q.add_argument("--rig", default="paper", help="rig to render: 'paper' or a TOML file (the "
+                   "one the calibration is of)")
+    q.set_defaults(func=cmd_study_monte_carlo)
+
+    q = study_parser("examples", "paper §4.6: the eight objects scanned with the paper's "
+                     "sections and pitch, clouds, figures, error table")
+    q.add_argument("--objects", default=None, help="comma-separated subset (default: all eight)")
+    q.add_argument("--noise", choices=("none", "realistic"), default="realistic")
+    q.add_argument("--spp", type=int, default=16)
+    q.add_argument("--calibration", default=None, help="measure with this calibration "
+                   "(default: the frames' true one)")
+    q.add_argument("--section-scale", type=float, default=1.0,
+                   help="fraction of the paper's sections to scan (quick looks)")
+    q.set_defaults(func=cmd_study_examples)
+
+    q = study_parser("design-space", "α/β sweep: coverage, overlap, multiple reflections, "
+                     "Monte Carlo radius uncertainty, heat maps, optimum")
+    q.add_argument("--alpha-deg", default="20:70:5", help="START:STOP:STEP (inclusive) or a value")
+    q.add_argument("--beta-deg", default="60:120:5", help="START:STOP:STEP (inclusive) or a value")
+    q.add_argument("--draws", type=int, default=16, help="noise/speckle draws per rig (0: "
+                   "geometry only)")
+    q.add_argument("--spp", type=int, default=16)
+    q.add_argument("--scale", type=float, default=1.0, help="image scale (quick looks)")
+    q.set_defaults(func=cmd_study_design_space)
+
+    q = study_parser("algorithms", "inverse vs classic triangulation and the three detectors "
+                     "on the same images: bias, std, coverage, time")
+    q.add_argument("--objects", default=None, help="comma-separated (default: plug-gauge, "
+                   "alu-pipe, grooved-shaft, cable-8, cube)")
+    q.add_argument("--repeats", type=int, default=3, help="noise draws per object and level")
+    q.set_defaults(func=cmd_study_algorithms)
+
+    s = sub.add_parser("demo", help="run the main job: rig, coverage, objects, figures")
+    s.add_argument("--out", default="lts360-demo", help="output directory (default ./lts360-demo)")
+    s.add_argument("--radius-mm", type=float, default=10.0, help="section radius for the coverage")
+    s.add_argument("--variant", default=None, help="Mitsuba variant (default llvm_ad_mono)")
+    s.add_argument("--no-render", action="store_true", help="skip the rendered frames")
+    s.add_argument("--quick", action="store_true", help="skip the calibration and the "
+                   "plug-gauge study (a few seconds instead of minutes)")
+    s.add_argument("--gauge-trials", type=int, default=10, help="plug-gauge placements")
+    s.add_argument("--seed", type=int, default=0)
+    s.set_defaults(func=cmd_demo)
+    return p

@@ -1,0 +1,161 @@
+"""The studies (``lts360 study ...``) and the demo."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from lts360.cli.usage import UsageError, _set_variant
+
+
+def _objects_arg(text: str | None, allowed, default) -> list[str]:
+    """``--objects a,b,c`` checked against ``allowed`` (``default`` when not given)."""
+    names = text.split(",") if text else list(default)
+    for name in names:
+        if name not in allowed:
+            raise UsageError(f"--objects: unknown object {name!r}; choose from "
+                             f"{', '.join(allowed)}")
+    return names
+
+def _optional_file(value, option: str):
+    if value is not None and not Path(value).is_file():
+        raise UsageError(f"{option}: {value!r} is not a file")
+    return value
+
+def _study_common(args) -> dict:
+    if args.seed < 0:
+        raise UsageError(f"--seed: must be >= 0, got {args.seed}")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers: must be >= 1, got {args.workers}")
+    if args.workers is not None and args.dask is not None:
+        raise UsageError("--workers and --dask exclude each other")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out: {str(out)!r} exists and is not a directory")
+    return {"seed": args.seed, "dask_address": args.dask}
+
+def _study_rig(rig: str) -> None:
+    from lts360.scenes.rig_io import load_rig
+
+    load_rig(rig)  # fail early on a bad rig
+
+def _check_shots(shots: int) -> None:
+    if not 1 <= shots <= 100:
+        raise UsageError(f"--compensation-shots: must be in [1, 100], got {shots}")
+
+def cmd_study_plug_gauge(args) -> int:
+    from lts360.experiments.gauge_study import format_gauge_table, run_plug_gauge_study
+
+    common = _study_common(args)
+    if not 1 <= args.trials <= 10000:
+        raise UsageError(f"--trials: must be in [1, 10000], got {args.trials}")
+    _check_shots(args.compensation_shots)
+    _optional_file(args.calibration, "--calibration")
+    _study_rig(args.rig)
+    _set_variant(args.variant)
+    table = run_plug_gauge_study(args.out, trials=args.trials, calibration=args.calibration,
+                                 noise=args.noise, spp=args.spp, rig=args.rig,
+                                 compensation_shots=args.compensation_shots,
+                                 workers=args.workers or 1, **common)
+    print(format_gauge_table(table))
+    print(f"wrote {args.out}/ (table.txt, table.json, plug-gauge.png, trials/results.nc)")
+    return 0
+
+def cmd_study_monte_carlo(args) -> int:
+    from lts360.experiments.gauge_study import ensure_calibration
+    from lts360.experiments.monte_carlo import format_mc, run_monte_carlo_study
+
+    common = _study_common(args)
+    if not 2 <= args.trials <= 10**6:
+        raise UsageError(f"--trials: must be in [2, 1000000], got {args.trials}")
+    if not 2 <= args.batch <= 10**5 or not 2 <= args.sensitivity_trials <= 10**5:
+        raise UsageError("--batch and --sensitivity-trials must be >= 2")
+    if not 1 <= args.placements <= 100:
+        raise UsageError(f"--placements: must be in [1, 100], got {args.placements}")
+    if not 1 <= args.digits <= 4:
+        raise UsageError(f"--digits: must be in [1, 4], got {args.digits}")
+    _check_shots(args.compensation_shots)
+    _optional_file(args.calibration, "--calibration")
+    _study_rig(args.rig)
+    _set_variant(args.variant)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    # The study compensates itself (every trial alike, at its reference placement).
+    cal = ensure_calibration(out, args.calibration, rig=args.rig, seed=args.seed,
+                             compensate=False)
+    summary = run_monte_carlo_study(out, calibration=cal, trials=args.trials, rig=args.rig,
+                                    compensate=not args.no_compensate,
+                                    compensation_shots=args.compensation_shots,
+                                    adaptive=args.adaptive, batch=args.batch, n_dig=args.digits,
+                                    sensitivity_trials=args.sensitivity_trials,
+                                    placements=args.placements, workers=args.workers, **common)
+    print(format_mc(summary))
+    print(f"wrote {out}/ (summary.json, monte-carlo.png, mc/batch_*/results.nc)")
+    return 0
+
+def cmd_study_examples(args) -> int:
+    from lts360.experiments.examples_study import (PAPER_EXAMPLES, format_examples,
+                                                   run_examples_study)
+
+    common = _study_common(args)
+    objects = _objects_arg(args.objects, list(PAPER_EXAMPLES), PAPER_EXAMPLES)
+    if not 0 < args.section_scale <= 1:
+        raise UsageError(f"--section-scale: must be in (0, 1], got {args.section_scale}")
+    _optional_file(args.calibration, "--calibration")
+    _set_variant(args.variant)
+    table = run_examples_study(args.out, objects=objects, noise=args.noise, spp=args.spp,
+                               calibration=args.calibration, section_scale=args.section_scale,
+                               workers=args.workers or 1, **common)
+    print(format_examples(table))
+    print(f"wrote {args.out}/ (table.txt, clouds/*.ply, figures/*.png, trials/results.nc)")
+    return 0
+
+def cmd_study_algorithms(args) -> int:
+    from lts360.experiments.algorithms import (DEFAULT_OBJECTS, format_algorithms,
+                                               run_algorithms_study)
+    from lts360.scenes.objects import object_types
+
+    common = _study_common(args)
+    objects = _objects_arg(args.objects, list(object_types()), DEFAULT_OBJECTS)
+    if not 1 <= args.repeats <= 1000:
+        raise UsageError(f"--repeats: must be in [1, 1000], got {args.repeats}")
+    _set_variant(args.variant)
+    table = run_algorithms_study(args.out, objects=objects, repeats=args.repeats,
+                                 workers=args.workers or 1, **common)
+    print(format_algorithms(table))
+    print(f"wrote {args.out}/ (table.txt, table.json, trials/results.nc)")
+    return 0
+
+def cmd_study_design_space(args) -> int:
+    from lts360.experiments.design_space import (format_design_space, parse_range,
+                                                 run_design_space_study)
+
+    common = _study_common(args)
+    try:
+        alpha, beta = parse_range(args.alpha_deg), parse_range(args.beta_deg)
+    except ValueError as exc:
+        raise UsageError(f"--alpha-deg/--beta-deg: {exc}") from None
+    if args.draws == 1 or not 0 <= args.draws <= 10000:
+        raise UsageError(f"--draws: must be 0 (geometry only) or in [2, 10000], got {args.draws}")
+    if not 0 < args.scale <= 1:
+        raise UsageError(f"--scale: must be in (0, 1], got {args.scale}")
+    _set_variant(args.variant)
+    summary = run_design_space_study(args.out, alpha_deg=alpha, beta_deg=beta, draws=args.draws,
+                                     spp=args.spp, scale=args.scale, workers=args.workers or 1,
+                                     **common)
+    print(format_design_space(summary))
+    print(f"wrote {args.out}/ (README.md, summary.json, grid.nc, design-space-*.png)")
+    return 0
+
+def cmd_demo(args) -> int:
+    from lts360.experiments.demo import run_demo
+
+    if not args.radius_mm > 0:
+        raise UsageError(f"--radius-mm: must be > 0, got {args.radius_mm}")
+    render = not args.no_render
+    if render:
+        _set_variant(args.variant)
+    if not 1 <= args.gauge_trials <= 1000:
+        raise UsageError(f"--gauge-trials: must be in [1, 1000], got {args.gauge_trials}")
+    run_demo(Path(args.out), radius_mm=args.radius_mm, render=render, paper=not args.quick,
+             gauge_trials=args.gauge_trials, seed=args.seed)
+    return 0
