@@ -80,3 +80,10 @@ def test_objects_lists_every_object(capsys):
     assert main(["objects"]) == 0
     out = capsys.readouterr().out
     assert "plug-gauge" in out and "diameter_mm (d)" in out
+
+
+def test_version_prints_the_installed_version_and_exits_0(capsys):
+    from importlib.metadata import version
+
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out.strip() == f"lts360 {version('lts360')}"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from lts360 import __version__
 from lts360.cli.commands import (
     cmd_calibrate, cmd_compensate, cmd_measure, cmd_object, cmd_objects, cmd_render, cmd_rig,
     cmd_score)
@@ -16,6 +17,7 @@ from lts360.cli.usage import _Parser
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="lts360", description="360° laser triangulation with mirrors: simulation "
                 "and reconstruction testbed.")
+    p.add_argument("--version", action="version", version=f"lts360 {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
 
