@@ -122,7 +122,7 @@ def test_a_ghost_stripe_on_a_search_segment_is_found(shift_px, disturbed):
     """Put a fake double-reflection stripe ``shift_px`` below the direct view's stripe."""
     import dataclasses
 
-    from lts360.experiments.design_space import GHOST_TOLERANCE_PX, _ghost_in_band
+    from lts360.experiments.design_space.trial import GHOST_TOLERANCE_PX, _ghost_in_band
 
     assert (shift_px < GHOST_TOLERANCE_PX) == disturbed
     rig = load_rig("paper")
