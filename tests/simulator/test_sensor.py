@@ -292,7 +292,8 @@ def test_emva1288_reference_implementation_agrees(monkeypatch):
     points of 96×96-pixel variances, each ±1.5 %), sigma_d 5 % (one dark variance), DSNU/PRNU
     5 % (see SPATIAL_RTOL).  Measured: K −0.9 %, QE +0.9 %, sigma_d +0.3 %, DSNU +0.5 %,
     PRNU −0.5 %."""
-    pytest.importorskip("emva1288", reason="the EMVA 1288 reference package is not installed")
+    pytest.importorskip("emva1288", reason="emva1288 (the EMVA 1288 reference implementation) is in "
+                        "the test extras: pip install -e '.[test]'")
     from emva1288.process.data import Data1288
     from emva1288.process.results import Results1288
     from emva1288.process.routines import get_int_imgs

@@ -151,8 +151,8 @@ def cmd_measure(args) -> int:
 def cmd_compensate(args) -> int:
     import dataclasses
 
-    from lts360.recon.calibration.model import load_calibration, save_calibration
     from lts360.recon.calibration.compensation import joint_view_offsets
+    from lts360.recon.calibration.model import load_calibration, save_calibration
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.recon.triangulation.measure import collect_sections, read_image

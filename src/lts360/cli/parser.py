@@ -6,11 +6,23 @@ import argparse
 
 from lts360 import __version__
 from lts360.cli.commands import (
-    cmd_calibrate, cmd_compensate, cmd_measure, cmd_object, cmd_objects, cmd_render, cmd_rig,
-    cmd_score)
+    cmd_calibrate,
+    cmd_compensate,
+    cmd_measure,
+    cmd_object,
+    cmd_objects,
+    cmd_render,
+    cmd_rig,
+    cmd_score,
+)
 from lts360.cli.studies import (
-    cmd_demo, cmd_study_algorithms, cmd_study_design_space, cmd_study_examples,
-    cmd_study_monte_carlo, cmd_study_plug_gauge)
+    cmd_demo,
+    cmd_study_algorithms,
+    cmd_study_design_space,
+    cmd_study_examples,
+    cmd_study_monte_carlo,
+    cmd_study_plug_gauge,
+)
 from lts360.cli.usage import _Parser
 
 

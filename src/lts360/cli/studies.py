@@ -93,8 +93,11 @@ def cmd_study_monte_carlo(args) -> int:
     return 0
 
 def cmd_study_examples(args) -> int:
-    from lts360.experiments.examples_study import (PAPER_EXAMPLES, format_examples,
-                                                   run_examples_study)
+    from lts360.experiments.examples_study import (
+        PAPER_EXAMPLES,
+        format_examples,
+        run_examples_study,
+    )
 
     common = _study_common(args)
     objects = _objects_arg(args.objects, list(PAPER_EXAMPLES), PAPER_EXAMPLES)
@@ -110,8 +113,11 @@ def cmd_study_examples(args) -> int:
     return 0
 
 def cmd_study_algorithms(args) -> int:
-    from lts360.experiments.algorithms import (DEFAULT_OBJECTS, format_algorithms,
-                                               run_algorithms_study)
+    from lts360.experiments.algorithms import (
+        DEFAULT_OBJECTS,
+        format_algorithms,
+        run_algorithms_study,
+    )
     from lts360.scenes.objects import object_types
 
     common = _study_common(args)
@@ -126,8 +132,11 @@ def cmd_study_algorithms(args) -> int:
     return 0
 
 def cmd_study_design_space(args) -> int:
-    from lts360.experiments.design_space import (format_design_space, parse_range,
-                                                 run_design_space_study)
+    from lts360.experiments.design_space import (
+        format_design_space,
+        parse_range,
+        run_design_space_study,
+    )
 
     common = _study_common(args)
     try:
