@@ -54,7 +54,6 @@ import argparse
 import concurrent.futures
 import importlib.util
 import json
-import math
 import multiprocessing
 import os
 import platform
@@ -409,7 +408,7 @@ def mc_wall_time(base: dict, n_trials: int, theta_step_deg: float, workers: int,
         pool.shutdown(wait=False, cancel_futures=True)  # running trials end on their own
     done = len(ys)
     return {"done": done, "wall_s": wall, "cut": done < n_trials,
-            "per_1000_s": wall * 1000.0 / done if done else math.nan,
+            "per_1000_s": wall * 1000.0 / done if done else None,
             "finite_y": int(np.count_nonzero(np.isfinite(ys)))}
 
 
@@ -448,7 +447,7 @@ def parse_args(argv=None) -> argparse.Namespace:
                     help="Monte Carlo trials (default 1000, quick 2; the row scales to 1000)")
     ap.add_argument("--mc-deadline", type=float, default=180.0,
                     help="stop the Monte Carlo trials after this many seconds (extrapolate)")
-    ap.add_argument("--budget", type=float, default=420.0,
+    ap.add_argument("--budget", type=float, default=390.0,
                     help="seconds for the whole check: the trials stop in time for it")
     ap.add_argument("--json", default=None, help="write rows and raw numbers here")
     return ap.parse_args(argv)
@@ -463,7 +462,7 @@ def _stop(signum, frame):
 
 
 def run_check(variant: str, backend: str, quick: bool, workers: int | None = None,
-              mc_deadline_s: float = 180.0, budget_s: float = 420.0,
+              mc_deadline_s: float = 180.0, budget_s: float = 390.0,
               trials: int | None = None, rows: list | None = None) -> dict:
     """Run the three parts; a part that fails leaves a FAILED row and the others still run.
 
