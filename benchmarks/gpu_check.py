@@ -35,9 +35,14 @@ targets "n/a"):
    calibration of placement 0 written as the calibration file (it carries no covariance, so
    the drawn calibration equals it; each trial still re-does the §4.4 compensation).  The
    trial function itself is numpy/scipy on the CPU (sensor noise, speckle, inverse
-   triangulation): the GPU only renders the placements.  Target: 1000 trials ≤ 60 s.  The
-   trials stop at ``--mc-deadline`` seconds; then the row gives the trials done and the time
-   for 1000 extrapolated from them, and says so.
+   triangulation; on a 2-core VM ~90 % of a trial is its two speckle patterns, scipy FFTs):
+   the GPU only renders the placements.  Target: 1000 trials ≤ 60 s.  The trials stop at
+   ``--mc-deadline`` seconds (or earlier, to keep the whole check within ``--budget``); then
+   the row gives the trials done and the time for 1000 extrapolated from them, and says so.
+
+``--quick`` (:data:`SIZES`): images at ¼ scale (320×256), a 4° θ step (90 θ × 801 r), 2 trials
+at a 5° θ step on one 4-spp placement, one or two warm repeats.  ``--trials N`` changes the
+number of Monte Carlo trials (the last row is scaled to 1000).
 
 Usage (repository root; see ``benchmarks/gpu_check.sh``)::
 
