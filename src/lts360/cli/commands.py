@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,7 @@ def cmd_objects(args) -> int:
     print("placement (every object): x_mm (x), y_mm (y), tilt_deg, tilt_azimuth_deg")
     return 0
 
+
 def _atomic_export(mesh, path: Path) -> None:
     path = Path(path)
     if path.suffix.lower() not in (".ply", ".stl", ".obj", ".off", ".glb"):
@@ -29,6 +31,7 @@ def _atomic_export(mesh, path: Path) -> None:
     tmp = path.with_name(f".{path.name}.tmp{path.suffix}")
     mesh.export(tmp)
     tmp.replace(path)
+
 
 def cmd_object(args) -> int:
     from lts360.scenes.objects import build_object
@@ -42,6 +45,7 @@ def cmd_object(args) -> int:
     print(f"spec: {obj.spec}")
     print(f"wrote {args.out}")
     return 0
+
 
 def cmd_rig(args) -> int:
     from lts360.experiments.report import format_coverage, format_rig
@@ -57,6 +61,7 @@ def cmd_rig(args) -> int:
                        max_incidence_deg=args.max_incidence_deg)
         print(format_coverage(rig, cov))
     return 0
+
 
 def cmd_render(args) -> int:
     import json
@@ -116,6 +121,7 @@ def cmd_render(args) -> int:
     print(f"{obj.name}: {args.sections} sections, pitch {args.pitch_mm:g} mm -> {out}/")
     return 0
 
+
 def cmd_measure(args) -> int:
     from lts360.recon.calibration.model import load_calibration
     from lts360.recon.triangulation.cloud import write_cloud
@@ -135,18 +141,19 @@ def cmd_measure(args) -> int:
     out = Path(args.out)
     if not out.parent.exists():
         raise UsageError(f"--out: directory {str(out.parent)!r} does not exist")
-    t0 = __import__("time").perf_counter()
+    t0 = time.perf_counter()
     cloud = measure_sections(sections, cal, grid, peak=args.peak, compensate=args.compensate,
                              backend=args.backend, method=args.method,
                              progress=(lambda it: _progress(it, "sections")) if len(sections) > 1
                              else None)
-    dt = __import__("time").perf_counter() - t0
+    dt = time.perf_counter() - t0
     write_cloud(out, cloud)
     valid = cloud.valid
     what = f"peak {args.peak}" if args.method == "inverse" else "classic (Steger 2-D)"
     print(f"{len(sections)} section(s), grid {grid.n_theta} θ × {grid.n_r} r, {what}: "
           f"{int(valid.sum())} valid points of {len(cloud)} θ samples in {dt:.2f} s -> {out}")
     return 0
+
 
 def cmd_compensate(args) -> int:
     import dataclasses
@@ -176,6 +183,7 @@ def cmd_compensate(args) -> int:
           f"shared: " + ", ".join(f"{k} ({1e3 * v[0]:+.1f}, {1e3 * v[1]:+.1f}) µm"
                                   for k, v in sorted(offsets.items())) + f" -> {out}")
     return 0
+
 
 def cmd_score(args) -> int:
 
@@ -208,6 +216,7 @@ def cmd_score(args) -> int:
     print(f"wrote {out}")
     return 0
 
+
 def _board_arg(text: str, name: str):
     """``SXxSYxMM`` (squares along x and y, square side in mm) → Chessboard."""
     from lts360.scenes.targets import Chessboard
@@ -219,6 +228,7 @@ def _board_arg(text: str, name: str):
         raise UsageError(f"{name}: expected SQUARESxSQUARESxSIDE_MM such as 7x6x2, got {text!r}") \
             from None
     return Chessboard(squares_x=sx, squares_y=sy, square_mm=mm, margin_mm=max(1.0, mm / 2))
+
 
 def cmd_calibrate(args) -> int:
     from lts360.experiments.calibration_run import format_report, run_calibrate

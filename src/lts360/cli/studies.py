@@ -16,10 +16,12 @@ def _objects_arg(text: str | None, allowed, default) -> list[str]:
                              f"{', '.join(allowed)}")
     return names
 
+
 def _optional_file(value, option: str):
     if value is not None and not Path(value).is_file():
         raise UsageError(f"{option}: {value!r} is not a file")
     return value
+
 
 def _study_common(args) -> dict:
     if args.seed < 0:
@@ -33,14 +35,17 @@ def _study_common(args) -> dict:
         raise UsageError(f"--out: {str(out)!r} exists and is not a directory")
     return {"seed": args.seed, "dask_address": args.dask}
 
+
 def _study_rig(rig: str) -> None:
     from lts360.scenes.rig_io import load_rig
 
     load_rig(rig)  # fail early on a bad rig
 
+
 def _check_shots(shots: int) -> None:
     if not 1 <= shots <= 100:
         raise UsageError(f"--compensation-shots: must be in [1, 100], got {shots}")
+
 
 def cmd_study_plug_gauge(args) -> int:
     from lts360.experiments.gauge_study import format_gauge_table, run_plug_gauge_study
@@ -59,6 +64,7 @@ def cmd_study_plug_gauge(args) -> int:
     print(format_gauge_table(table))
     print(f"wrote {args.out}/ (table.txt, table.json, plug-gauge.png, trials/results.nc)")
     return 0
+
 
 def cmd_study_monte_carlo(args) -> int:
     from lts360.experiments.gauge_study import ensure_calibration
@@ -92,6 +98,7 @@ def cmd_study_monte_carlo(args) -> int:
     print(f"wrote {out}/ (summary.json, monte-carlo.png, mc/batch_*/results.nc)")
     return 0
 
+
 def cmd_study_examples(args) -> int:
     from lts360.experiments.examples_study import (
         PAPER_EXAMPLES,
@@ -112,6 +119,7 @@ def cmd_study_examples(args) -> int:
     print(f"wrote {args.out}/ (table.txt, clouds/*.ply, figures/*.png, trials/results.nc)")
     return 0
 
+
 def cmd_study_algorithms(args) -> int:
     from lts360.experiments.algorithms import (
         DEFAULT_OBJECTS,
@@ -130,6 +138,7 @@ def cmd_study_algorithms(args) -> int:
     print(format_algorithms(table))
     print(f"wrote {args.out}/ (table.txt, table.json, trials/results.nc)")
     return 0
+
 
 def cmd_study_design_space(args) -> int:
     from lts360.experiments.design_space import (
@@ -154,6 +163,7 @@ def cmd_study_design_space(args) -> int:
     print(format_design_space(summary))
     print(f"wrote {args.out}/ (README.md, summary.json, grid.nc, design-space-*.png)")
     return 0
+
 
 def cmd_demo(args) -> int:
     from lts360.experiments.demo import run_demo

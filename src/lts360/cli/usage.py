@@ -11,9 +11,11 @@ __all__ = ["UsageError"]
 class UsageError(Exception):
     """Bad input from the user: one line on stderr, exit code 2."""
 
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str):  # one line, exit 2, no usage dump
         raise UsageError(f"{self.prog}: error: {message}")
+
 
 def _set_variant(name: str | None) -> str:
     import mitsuba as mi
@@ -28,6 +30,7 @@ def _set_variant(name: str | None) -> str:
     except Exception as exc:  # e.g. a CUDA variant on a machine without a GPU
         raise UsageError(f"--variant: {name} cannot run here ({str(exc).splitlines()[0]})") from None
     return name
+
 
 def _progress(items, desc):
     try:

@@ -37,6 +37,7 @@ from lts360.experiments.runner import (
 
 # --- the study ----------------------------------------------------------------------------------
 
+
 def _grid_array(grid, name: str) -> np.ndarray:
     return np.asarray(grid[name].values, dtype=float)
 

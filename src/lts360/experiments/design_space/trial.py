@@ -32,6 +32,7 @@ from lts360.scenes.rig import Rig, RigError
 
 # --- the rigs -----------------------------------------------------------------------------------
 
+
 def _preset_dict() -> dict:
     text = resources.files("lts360.scenes").joinpath("presets", "paper.toml").read_text()
     return tomllib.loads(text)

@@ -326,7 +326,6 @@ def _board_model_corners(images, board, K, dist, rvecs, tvecs, progress=None) ->
 
     import cv2
 
-
     def one(args):
         image, r, t = args
         return refine_corners_locally(image, board, cv2.Rodrigues(np.ravel(r))[0], np.ravel(t),

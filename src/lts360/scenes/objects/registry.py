@@ -14,6 +14,7 @@ from lts360.scenes.objects.base import Placement, SceneObject
 
 __all__ = ["ObjectType", "register", "registered", "canonical_spec"]
 
+
 @dataclass(frozen=True)
 class ObjectType:
     """One entry of the registry.
