@@ -40,24 +40,36 @@ def run(*args):
     (("compensate", "ref", "--calibration", "c.json", "--out", "c2.json", "--band-mm", "20"),
      "--band-mm"),
 ])
-def test_usage_errors_are_one_line_exit_2(args, field, tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "lts360.cli", *args], capture_output=True,
-                          text=True, cwd=tmp_path)
-    assert proc.returncode == 2
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in proc.stderr
+def test_usage_errors_are_one_line_exit_2(args, field, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(list(args)) == 2
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err
     assert field in lines[0]
     assert not list(tmp_path.iterdir())  # nothing half-written
 
 
-def test_help_for_every_command():
+def test_a_usage_error_is_exit_2_and_one_line_from_the_real_process(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "lts360.cli", "study", "plug-gauge", "--out",
+                           "s", "--trials", "0"], capture_output=True, text=True, cwd=tmp_path)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--trials" in lines[0] and "Traceback" not in proc.stderr
+    assert not list(tmp_path.iterdir())
+
+
+def test_help_for_every_command(capsys):
     for cmd in ("objects", "object", "rig", "render", "measure", "compensate", "score",
                 "calibrate", "study", "demo"):
-        proc = run(cmd, "--help")
-        assert proc.returncode == 0 and "usage: lts360" in proc.stdout
+        assert main([cmd, "--help"]) == 0
+        assert "usage: lts360" in capsys.readouterr().out
     for study in ("plug-gauge", "examples", "design-space", "monte-carlo", "algorithms"):
-        proc = run("study", study, "--help")
-        assert proc.returncode == 0 and "--seed" in proc.stdout and "--dask" in proc.stdout
+        assert main(["study", study, "--help"]) == 0
+        out = capsys.readouterr().out
+        assert "--seed" in out and "--dask" in out
+    proc = run("measure", "--help")  # the installed entry point's module, as a process
+    assert proc.returncode == 0 and "usage: lts360" in proc.stdout
 
 
 def test_object_writes_a_watertight_mesh(tmp_path, capsys):

@@ -28,6 +28,7 @@ def test_demo_writes_rig_objects_frames_and_scores(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)  # the whole demo: minutes on 2 cores
 def test_the_full_demo_calibrates_and_runs_the_plug_gauge_study(tmp_path):
     """The README's main job as a user runs it (minutes): calibration from rendered images,
     the gauge placed and measured, the paper's table beside ours."""

@@ -180,6 +180,7 @@ def study(tmp_path_factory):
     return out, kwargs, summary
 
 
+@pytest.mark.slow
 def test_study_writes_results_figures_and_readme(study):
     import xarray as xr
 
@@ -210,6 +211,7 @@ def test_study_writes_results_figures_and_readme(study):
     assert "radius standard deviation" in text and "optimum: α = 40°" in text
 
 
+@pytest.mark.slow
 def test_rerunning_the_study_resumes(study):
     out, kwargs, first = study
     files = sorted((out / "trials" / "trials").glob("trial_*.nc"))

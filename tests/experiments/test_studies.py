@@ -98,6 +98,7 @@ def truth_calibration(tmp_path_factory):
     return path
 
 
+@pytest.mark.slow
 def test_plug_gauge_study_end_to_end(tmp_path, truth_calibration):
     from lts360.experiments.gauge_study import run_plug_gauge_study
 
@@ -111,6 +112,7 @@ def test_plug_gauge_study_end_to_end(tmp_path, truth_calibration):
     assert len(list((tmp_path / "clouds").glob("*.ply"))) == 2
 
 
+@pytest.mark.slow
 def test_monte_carlo_study_end_to_end(tmp_path, truth_calibration):
     from lts360.experiments.monte_carlo import INPUTS, run_monte_carlo_study
 

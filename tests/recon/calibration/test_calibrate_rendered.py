@@ -92,6 +92,7 @@ def test_estimates_are_near_the_truth(calibrated):
     assert np.linalg.norm(acc["measurement_frame"]["origin_um"]) < 700
 
 
+@pytest.mark.slow
 def test_the_images_folder_alone_reproduces_the_calibration(calibrated, tmp_path):
     """`--images DIR`: nothing rendered, the same result from the same files."""
     from lts360.experiments.calibration_run import run_calibrate
@@ -108,6 +109,7 @@ def test_the_images_folder_alone_reproduces_the_calibration(calibrated, tmp_path
     assert abs(a.laser_plane[1] - b.laser_plane[1]) < 1e-3
 
 
+@pytest.mark.slow
 def test_a_camera_model_round_on_the_same_images(calibrated, tmp_path):
     """`--camera-model 1` through the whole pipeline: the camera boards' corners from the
     image model of their own squares fit Zhang's model far more tightly than SB's, and the

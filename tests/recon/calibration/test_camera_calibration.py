@@ -42,6 +42,7 @@ def _poses(rig, board):
     return out
 
 
+@pytest.mark.slow
 def test_zhang_calibration_recovers_the_rendered_camera():
     if "llvm_ad_mono" not in mi.variants():
         pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
@@ -116,6 +117,7 @@ def test_corners_far_off_the_fit_are_left_out(monkeypatch):
     assert sum(errors(cal)) < sum(errors(naive))
 
 
+@pytest.mark.slow
 def test_symmetrized_corners_do_not_depend_on_the_board_handedness():
     """A board and its mirror image give the same corners (mapped back), up to matching:
     the four-flip average makes SB's handedness bias cancel by construction.  Plain SB
@@ -180,6 +182,7 @@ def _board_image(R, t, K, geo, *, size=(360, 300), blur_px=1.5, ss=4):
     return 200.0 * ndimage.gaussian_filter(pix, blur_px)
 
 
+@pytest.mark.slow
 def test_the_board_model_rounds_calibrate_the_camera_from_every_pixel():
     """Eight synthetic board images (hard edges, 1.5 px blur, no noise, squares ~17 px) of a
     62° camera.  SB's corners are 0.1–0.3 px off here and Zhang's method on them is poor

@@ -24,6 +24,7 @@ mi = pytest.importorskip("mitsuba", reason="rendering the calibration image need
 pytest.importorskip("cv2", reason="corner detection needs OpenCV")
 
 
+@pytest.mark.slow
 def test_one_board_seen_directly_and_in_the_right_mirror():
     if "llvm_ad_mono" not in mi.variants():
         pytest.skip("Mitsuba's llvm_ad_mono variant is not available")

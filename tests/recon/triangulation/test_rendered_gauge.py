@@ -134,6 +134,7 @@ def test_classic_baseline_on_the_same_image(rendered):
     assert m["rms_mm"] * 1e3 <= 8.0
 
 
+@pytest.mark.slow
 def test_the_lens_aperture_shifts_only_the_defocused_views(rendered):
     """The same frame through the thin lens, radii point by point against the pinhole frame
     (16 spp, seed 11, 8-bit, true calibration).  Measured 2026-12-02:

@@ -40,7 +40,12 @@ TOLERANCE = {
 }
 
 
-@pytest.mark.parametrize("name", sorted(TOLERANCE))
+#: One round, one faceted and one stranded object in the fast tier; the rest with -m slow.
+FAST = ("plug-gauge", "cube", "cable-8")
+
+
+@pytest.mark.parametrize("name", [n if n in FAST else pytest.param(n, marks=pytest.mark.slow)
+                                  for n in sorted(TOLERANCE)])
 def test_object_section_within_its_tolerance(name):
     if "llvm_ad_mono" not in mi.variants():
         pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
