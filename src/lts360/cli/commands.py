@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 
@@ -124,10 +125,13 @@ def cmd_render(args) -> int:
 
 def cmd_measure(args) -> int:
     from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.triangulation.acceptance import refusal, section_coverage
     from lts360.recon.triangulation.cloud import write_cloud
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.measure import collect_sections, measure_sections
 
+    if not 0.0 <= args.min_coverage <= 1.0:
+        raise UsageError(f"--min-coverage: must be in [0, 1], got {args.min_coverage}")
     if not args.radius_mm > 0 or not args.band_mm > 0 or args.band_mm >= args.radius_mm:
         raise UsageError(f"--radius-mm/--band-mm: need 0 < band < radius, got "
                          f"{args.radius_mm}, {args.band_mm}")
@@ -147,11 +151,20 @@ def cmd_measure(args) -> int:
                              progress=(lambda it: _progress(it, "sections")) if len(sections) > 1
                              else None)
     dt = time.perf_counter() - t0
-    write_cloud(out, cloud)
+    coverages = section_coverage(cloud, grid, n_sections=len(sections),
+                                 windows_in_cloud=args.method == "inverse")
+    refused = refusal(coverages, grid, min_fraction=args.min_coverage)
     valid = cloud.valid
+    if not valid.any():  # nothing to write: an empty cloud is no measurement
+        print(f"lts360: measure: {refused}; nothing written", file=sys.stderr)
+        return 3
+    write_cloud(out, cloud)
     what = f"peak {args.peak}" if args.method == "inverse" else "classic (Steger 2-D)"
     print(f"{len(sections)} section(s), grid {grid.n_theta} θ × {grid.n_r} r, {what}: "
           f"{int(valid.sum())} valid points of {len(cloud)} θ samples in {dt:.2f} s -> {out}")
+    if refused is not None:
+        print(f"lts360: measure: {refused}; the cloud is written with its flags", file=sys.stderr)
+        return 3
     return 0
 
 

@@ -93,6 +93,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="apply the calibration's residual compensation (paper §4.4)")
     s.add_argument("--backend", choices=("auto", "numpy", "llvm", "cuda"), default="auto",
                    help="auto: the Dr.Jit kernel for the centroid, numpy otherwise")
+    s.add_argument("--min-coverage", type=float, default=0.5,
+                   help="refuse (exit 3) a section that measures less than this share of the "
+                        "θ coverage its views predict (default 0.5); a section with no valid "
+                        "point is always refused")
     s.set_defaults(func=cmd_measure)
 
     s = sub.add_parser("compensate", help="residual compensation (paper §4.4): the mirror "
