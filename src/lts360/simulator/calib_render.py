@@ -10,6 +10,14 @@ laser-on and a laser-off image at one shorter exposure set on the laser-lit pixe
 their difference is the laser line.  A laser board planned to be seen in a mirror too
 (``shot.mirror``) is pictured with the mirrors for its corners and with the mirrors covered
 for the line (``laser_mirrors_covered`` in the manifest).
+
+Rendering is windowed (``windowed=True``): the picture without the board (ambient light, the
+mirrors) is rendered once per mirror configuration and sample count, and each shot renders
+only the pixels where its board can change the picture — seen directly and through every
+mirror sequence, padded by the lens blur (:func:`lts360.simulator.board_window.board_windows`) —
+at the same sample count, ray for ray as a full render (:func:`lts360.simulator.render.render_pixels`).
+Outside those windows the board changes nothing, so the image is that of a full render
+(another noise realisation of the same expected image).
 """
 
 from __future__ import annotations
@@ -23,7 +31,8 @@ from lts360.scenes.calib_plan import BoardShot
 from lts360.scenes.rig import Rig
 from lts360.simulator.frame import sensor_image
 from lts360.simulator.io import rig_truth, write_json, write_png
-from lts360.simulator.render import render_radiance
+from lts360.simulator.board_window import board_windows
+from lts360.simulator.render import RenderResult, render_pixels, render_radiance, window_pixels
 from lts360.simulator.scene import SceneSpec
 
 __all__ = ["render_calibration_images", "MANIFEST_NAME"]
@@ -31,15 +40,64 @@ __all__ = ["render_calibration_images", "MANIFEST_NAME"]
 MANIFEST_NAME = "manifest.json"
 
 
-def _render(rig, board, *, laser_on, spp, seed, thin_lens, mirrors=True):
-    spec = SceneSpec(rig if mirrors else replace(rig, mirrors=()), (), ambient="bright",
-                     targets=(board,))
-    return render_radiance(spec, spp=spp, seed=seed, thin_lens=thin_lens, laser_on=laser_on)
+#: Sampler seed of the pictures without a board (one per mirror configuration and spp).
+CONTEXT_SEED = 4_000_000_000
+
+
+def composite(base: RenderResult, pixels_xy: np.ndarray, radiance: np.ndarray,
+              laser: np.ndarray, *, seconds: float, seed: int) -> RenderResult:
+    """``base`` with the listed pixels replaced.
+
+    Parameters
+    ----------
+    base : RenderResult
+        Full frame (radiance and laser share, W m⁻² sr⁻¹).
+    pixels_xy : (n, 2) int
+        Pixel ``(x, y)``.
+    radiance, laser : (n,) float
+        Their values, W m⁻² sr⁻¹.
+    seconds : float
+        Wall time to report (s).
+    seed : int
+        Sampler seed to report.
+    """
+    px = np.asarray(pixels_xy, dtype=np.intp).reshape(-1, 2)
+    rad = base.radiance_W_m2_sr.copy()
+    las = base.laser_W_m2_sr.copy()
+    rad[px[:, 1], px[:, 0]] = radiance
+    las[px[:, 1], px[:, 0]] = laser
+    return replace(base, radiance_W_m2_sr=rad, laser_W_m2_sr=las, seed=int(seed),
+                   seconds=float(seconds))
+
+
+def _render(rig, board, *, laser_on, spp, seed, thin_lens, mirrors=True, context=None,
+            scale=1.0):
+    """One picture; ``context`` (a dict, filled here) holds the board-less pictures for
+    windowed rendering, ``None`` renders the full frame; ``scale`` for tests."""
+    scene_rig = rig if mirrors else replace(rig, mirrors=())
+    spec = SceneSpec(scene_rig, (), ambient="bright", targets=(board,))
+    if context is None:
+        return render_radiance(spec, spp=spp, seed=seed, thin_lens=thin_lens, laser_on=laser_on,
+                               scale=scale)
+    key = (bool(mirrors), int(spp), bool(thin_lens), float(scale))
+    seconds = 0.0
+    if key not in context:
+        # Without a board nothing is lit by the laser (the mirrors are the only other
+        # surfaces, and they are delta reflectors): one picture serves laser on and off.
+        context[key] = render_radiance(SceneSpec(scene_rig, (), ambient="bright"), spp=spp,
+                                       seed=CONTEXT_SEED, thin_lens=thin_lens, laser_on=False,
+                                       scale=scale)
+        seconds = context[key].seconds
+    px = window_pixels(board_windows(scene_rig, board, thin_lens=thin_lens, scale=scale))
+    rad, las, sec = render_pixels(spec, px, spp=spp, seed=seed, thin_lens=thin_lens,
+                                  laser_on=laser_on, scale=scale)
+    return composite(context[key], px, rad, las, seconds=seconds + sec, seed=seed)
 
 
 def render_calibration_images(rig: Rig, shots: list[BoardShot], out_dir, *, noise: str = "none",
                               seed: int = 0, spp: int = 16, thin_lens: bool = True,
-                              target_spp: int | None = None, progress=None) -> dict:
+                              target_spp: int | None = None, windowed: bool = True,
+                              progress=None) -> dict:
     """Render every shot into ``out_dir`` (PNG + ``manifest.json``) and return the manifest.
 
     Parameters
@@ -54,6 +112,9 @@ def render_calibration_images(rig: Rig, shots: list[BoardShot], out_dir, *, nois
         board's edges are blurred over ~5 px by the lens aperture, which the renderer
         integrates by sampling — at 64 spp the edge pixels carry 3 % of the white level of
         Monte Carlo noise (multijitter; independent 7 %), against ~1 % of shot noise.
+    windowed : bool
+        Render each board's windows only, over one board-less picture per mirror
+        configuration (see the module docstring); ``False``: every picture in full.
     progress : callable, optional
         Called with each shot's name after it is written.
 
@@ -84,6 +145,7 @@ def render_calibration_images(rig: Rig, shots: list[BoardShot], out_dir, *, nois
                 "mirrors": [m.name for m in rig.mirrors], "shots": []}
     truth_boards = []
     K = None
+    context = {} if windowed else None
     for k, shot in enumerate(shots):
         s = int(seed) * 1000 + k
         spp_k = spp if (shot.kind == "camera" or target_spp is None) else int(target_spp)
@@ -99,11 +161,12 @@ def render_calibration_images(rig: Rig, shots: list[BoardShot], out_dir, *, nois
             # beside the first); the board picture with the mirrors, for both views.
             covered = shot.mirror is not None
             on = _render(rig, shot.board, laser_on=True, spp=spp_k, seed=s, thin_lens=thin_lens,
-                         mirrors=not covered)
+                         mirrors=not covered, context=context)
             off = _render(rig, shot.board, laser_on=False, spp=spp_k, seed=s, thin_lens=thin_lens,
-                          mirrors=not covered)
+                          mirrors=not covered, context=context)
             lit = off if not covered else _render(rig, shot.board, laser_on=False, spp=spp_k,
-                                                  seed=s + 900_000, thin_lens=thin_lens)
+                                                  seed=s + 900_000, thin_lens=thin_lens,
+                                                  context=context)
             img_board, _, _ = sensor_image(rig, lit, noise=noise, seed=s + 300_000)
             if covered:
                 entry["laser_mirrors_covered"] = True
@@ -116,7 +179,7 @@ def render_calibration_images(rig: Rig, shots: list[BoardShot], out_dir, *, nois
             K, rendered_spp = on.K, on.spp
         else:
             res = _render(rig, shot.board, laser_on=False, spp=spp_k, seed=s, thin_lens=thin_lens,
-                          mirrors=not shot.mirrors_covered)
+                          mirrors=not shot.mirrors_covered, context=context)
             img, _, _ = sensor_image(rig, res, noise=noise, seed=s)
             if shot.mirrors_covered:
                 entry["mirrors_covered"] = True

@@ -14,7 +14,8 @@ import numpy as np
 from lts360.geometry.camera import scale_intrinsics
 from lts360.simulator.scene import SceneSpec, load_scene
 
-__all__ = ["RenderResult", "render_radiance", "require_variant", "default_variant"]
+__all__ = ["RenderResult", "render_radiance", "render_pixels", "window_pixels", "require_variant",
+           "default_variant"]
 
 VARIANTS = ("llvm_ad_mono", "cuda_ad_mono", "scalar_mono", "scalar_rgb", "llvm_ad_rgb", "cuda_ad_rgb")
 
@@ -66,6 +67,117 @@ class RenderResult:
     seconds: float
 
 
+def _check_args(spp, seed, scale, integrator, sampler) -> None:
+    if not (isinstance(spp, int) and 1 <= spp <= 4096):
+        raise ValueError(f"spp must be an integer in [1, 4096], got {spp!r}")
+    if not (isinstance(seed, int) and seed >= 0):
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    if not 0.0 < scale <= 1.0:
+        raise ValueError(f"scale must be in (0, 1], got {scale}")
+    if integrator not in ("laser", "path"):
+        raise ValueError(f"integrator must be 'laser' or 'path', got {integrator!r}")
+    if sampler not in ("multijitter", "independent", "stratified", "ldsampler"):
+        raise ValueError(f"sampler must be multijitter, independent, stratified or ldsampler, got {sampler!r}")
+
+
+def _setup(spec, *, spp, scale, max_bounces, thin_lens, laser_on, integrator, sampler):
+    """Loaded scene (full film) and integrator."""
+    import mitsuba as mi
+
+    from lts360.simulator.camera_plugin import camera_to_mitsuba, register
+    from lts360.simulator.integrator import laser_params, make_integrator
+
+    register()
+    sensor = camera_to_mitsuba(spec.rig.camera, spp=spp, thin_lens=thin_lens, scale=scale)
+    sensor["sampler"] = {"type": sampler, "sample_count": spp}
+    scene = load_scene(spec, sensor)
+    if integrator == "laser":
+        lp, mps = laser_params(spec.rig, laser_on=laser_on)
+        integ = make_integrator(lp, mps, max_bounces=max_bounces, ambient=spec.ambient != "off")
+    else:
+        integ = mi.load_dict({"type": "path", "max_depth": max_bounces + 2})
+    return scene, integ
+
+
+def window_pixels(windows) -> np.ndarray:
+    """(n, 2) int ``(x, y)`` of every pixel of the windows ``(x, y, width, height)``, window
+    by window, row-major (the windows should not overlap: a shared pixel is listed twice)."""
+    blocks = [np.stack(np.meshgrid(np.arange(x, x + w), np.arange(y, y + h)), axis=-1).reshape(-1, 2)
+              for x, y, w, h in windows]
+    return np.concatenate(blocks) if blocks else np.zeros((0, 2), dtype=int)
+
+
+def render_pixels(spec: SceneSpec, pixels_xy, *, spp: int = 4, seed: int = 0, scale: float = 1.0,
+                  max_bounces: int = 2, thin_lens: bool = True, laser_on: bool = True,
+                  integrator: str = "laser", sampler: str = "multijitter"
+                  ) -> tuple[np.ndarray, np.ndarray, float]:
+    """Render only the listed pixels of the (scaled) film, ray for ray as :func:`render_radiance`.
+
+    The camera rays, samples and box reconstruction are those of a full render: each pixel is
+    the mean of its ``spp`` samples, the film position of a sample is the pixel plus the
+    sampler's 2-D jitter, then (thin lens) the sampler's aperture sample — Mitsuba's order.
+    One wavefront is launched for all pixels; the pixel list is kernel data, so Dr.Jit
+    compiles one kernel per scene structure and reuses it for any pixel set (a film crop of
+    another size or offset would compile anew: its size and offset are kernel constants).
+    The noise realisation differs from a full render's (the sampler is seeded per wavefront
+    lane), its statistics do not.
+
+    Parameters
+    ----------
+    spec : SceneSpec
+    pixels_xy : (n, 2) int
+        Pixel ``(x, y)`` of the full film (OpenCV: pixel ``(x, y)`` covers
+        ``[x − 0.5, x + 0.5) × [y − 0.5, y + 0.5)``), inside the film.
+    spp, seed, scale, max_bounces, thin_lens, laser_on, integrator, sampler
+        As :func:`render_radiance`.
+
+    Returns
+    -------
+    radiance_W_m2_sr : (n,) float32
+    laser_W_m2_sr : (n,) float32
+        Zero for ``integrator="path"``.
+    seconds : float
+        Wall time of the wavefront (tracing, compiling and running the kernel).
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    _check_args(spp, seed, scale, integrator, sampler)
+    require_variant()
+    px = np.asarray(pixels_xy, dtype=np.int64).reshape(-1, 2)
+    scene, integ = _setup(spec, spp=spp, scale=scale, max_bounces=max_bounces,
+                          thin_lens=thin_lens, laser_on=laser_on, integrator=integrator,
+                          sampler=sampler)
+    sensor = scene.sensors()[0]
+    width, height = (int(c) for c in sensor.film().size())
+    if np.any(px < 0) or np.any(px >= (width, height)):
+        raise ValueError(f"pixels_xy must lie inside the {width}x{height} film")
+    n = len(px)
+    if n == 0:
+        z = np.zeros(0, dtype=np.float32)
+        return z, z.copy(), 0.0
+    t0 = time.perf_counter()
+    smp = sensor.sampler()
+    smp.set_samples_per_wavefront(spp)
+    smp.seed(dr.opaque(mi.UInt32, seed), n * spp)
+    lane_px = dr.arange(mi.UInt32, n * spp) // spp
+    pos = mi.Vector2f(dr.gather(mi.Float, mi.Float(px[:, 0].astype(np.float32)), lane_px),
+                      dr.gather(mi.Float, mi.Float(px[:, 1].astype(np.float32)), lane_px))
+    pos = pos + smp.next_2d()
+    aperture = smp.next_2d() if sensor.needs_aperture_sample() else mi.Point2f(0.5)
+    ray, weight = sensor.sample_ray_differential(0.0, 0.0, pos / mi.ScalarVector2f(width, height),
+                                                 aperture)
+    L, _, aovs = integ.sample(scene, smp, ray, None, True)
+    L = weight * L
+    value = L[0] if dr.size_v(L) != 3 else mi.luminance(L)
+    aov = aovs[0] if integrator == "laser" else dr.zeros(mi.Float, n * spp)
+    value, aov = dr.block_sum(value, spp) / spp, dr.block_sum(aov, spp) / spp
+    dr.eval(value, aov)
+    radiance = np.array(value, dtype=np.float32)
+    laser = np.array(aov, dtype=np.float32)
+    return radiance, laser, time.perf_counter() - t0
+
+
 def render_radiance(spec: SceneSpec, *, spp: int = 4, seed: int = 0, scale: float = 1.0,
                     max_bounces: int = 2, thin_lens: bool = True, laser_on: bool = True,
                     integrator: str = "laser", sampler: str = "multijitter") -> RenderResult:
@@ -96,29 +208,11 @@ def render_radiance(spec: SceneSpec, *, spp: int = 4, seed: int = 0, scale: floa
     """
     import mitsuba as mi
 
-    from lts360.simulator.camera_plugin import camera_to_mitsuba, register
-    from lts360.simulator.integrator import laser_params, make_integrator
-
-    if not (isinstance(spp, int) and 1 <= spp <= 4096):
-        raise ValueError(f"spp must be an integer in [1, 4096], got {spp!r}")
-    if not (isinstance(seed, int) and seed >= 0):
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-    if not 0.0 < scale <= 1.0:
-        raise ValueError(f"scale must be in (0, 1], got {scale}")
-    if integrator not in ("laser", "path"):
-        raise ValueError(f"integrator must be 'laser' or 'path', got {integrator!r}")
+    _check_args(spp, seed, scale, integrator, sampler)
     variant = require_variant()
-    register()
-    if sampler not in ("multijitter", "independent", "stratified", "ldsampler"):
-        raise ValueError(f"sampler must be multijitter, independent, stratified or ldsampler, got {sampler!r}")
-    sensor = camera_to_mitsuba(spec.rig.camera, spp=spp, thin_lens=thin_lens, scale=scale)
-    sensor["sampler"] = {"type": sampler, "sample_count": spp}
-    scene = load_scene(spec, sensor)
-    if integrator == "laser":
-        lp, mps = laser_params(spec.rig, laser_on=laser_on)
-        integ = make_integrator(lp, mps, max_bounces=max_bounces, ambient=spec.ambient != "off")
-    else:
-        integ = mi.load_dict({"type": "path", "max_depth": max_bounces + 2})
+    scene, integ = _setup(spec, spp=spp, scale=scale, max_bounces=max_bounces,
+                          thin_lens=thin_lens, laser_on=laser_on, integrator=integrator,
+                          sampler=sampler)
     t0 = time.perf_counter()
     img = mi.render(scene, integrator=integ, spp=spp, seed=seed)
     arr = np.array(img, dtype=np.float32)

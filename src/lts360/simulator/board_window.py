@@ -1,0 +1,302 @@
+"""Image windows where a calibration board changes the picture: seen directly and through
+every mirror sequence the renderer follows, blurred by the thin lens.  numpy only.
+
+The simulator knows the true rig and board pose, so it can render the board's windows at the
+full sample count and the rest of the frame (ambient environment, mirrors) once.  Outside the
+windows returned here the board changes nothing: the integrator's only non-delta surface is
+the board (no interreflections), so the board shows up only where a camera ray — through the
+pupil and up to ``max_bounces`` planar mirrors — meets it.
+
+Geometry, exact for the renderer's camera (:mod:`lts360.simulator.camera_plugin`): a path
+through the mirrors ``(s_0, …, s_{n−1})`` (``s_{n−1}`` nearest the camera) sees the virtual
+board ``M_{s_{n−1}} ⋯ M_{s_0} X``; it is convex, so its ideal (undistorted) normalised image
+``Q`` is a convex polygon.  A thin-lens ray from pupil point ``a`` through the film point of
+normalised ideal coordinates ``x`` meets depth ``z`` at ``X/z = x − a (1/z − 1/s_f)``: a point
+at depth ``z`` is spread over a disk of radius ``ρ = r_pupil |1/z − 1/s_f|`` in normalised
+units, so the board touches the film where ``Q ⊕ disk(ρ)`` does.  Its pixel bounding box is
+found on its boundary: the samples of ``∂Q`` that project inside the film and the film's own
+border where it lies in ``Q ⊕ ρ``; the box is then padded by ``ρ`` in pixels (times the
+distortion's largest stretch), the sample spacing, one pixel for the pixel footprint and box
+filter, and a safety margin.  The box of each mirror view is intersected with the boxes of the
+(virtual) mirror rectangles the path goes through, padded the same way.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lts360.geometry.camera import distort_normalized, scale_intrinsics, undistort_normalized
+
+__all__ = ["board_windows", "view_box", "merge_boxes", "mirror_paths", "clip_near",
+           "blur_radius_norm", "FILTER_MARGIN_PX", "SAFETY_MARGIN_PX"]
+
+#: Pixel footprint plus Mitsuba's ``box`` filter (radius 0.5 px): a sample lands in its own
+#: pixel, at most half a pixel from the pixel centre.
+FILTER_MARGIN_PX = 1.0
+#: Extra pixels around every window.
+SAFETY_MARGIN_PX = 4.0
+#: Nearest depth rendered (mm): the camera plugin's near clip plane.
+NEAR_MM = 1.0
+_EDGE_SAMPLES = 256
+
+
+def mirror_paths(mirrors, max_bounces: int) -> list[tuple[tuple[int, ...], np.ndarray]]:
+    """Every mirror sequence the renderer follows and its unfolding transform.
+
+    Parameters
+    ----------
+    mirrors : sequence of lts360.scenes.rig.Mirror
+    max_bounces : int, >= 0
+
+    Returns
+    -------
+    list of (seq, T)
+        ``seq`` from the object towards the camera (as :func:`lts360.scenes.coverage.view_name`),
+        ``T`` (4, 4) the product of mirror matrices mapping a world point to its virtual image
+        seen along that path (identity for the direct view).
+    """
+    from lts360.scenes.coverage import mirror_sequences
+
+    out = []
+    for seq in mirror_sequences(tuple(mirrors), max_bounces):
+        T = np.eye(4)
+        for k in seq:
+            T = mirrors[k].T @ T
+        out.append((tuple(seq), T))
+    return out
+
+
+def clip_near(poly_cam_mm: np.ndarray, z_min_mm: float = NEAR_MM) -> np.ndarray:
+    """Clip a planar convex polygon (camera frame, mm) to ``z >= z_min_mm``.
+
+    Parameters
+    ----------
+    poly_cam_mm : (n, 3) float
+        Vertices in order.
+
+    Returns
+    -------
+    (m, 3) float
+        The clipped polygon (``m = 0`` when it lies wholly in front of the near plane).
+    """
+    P = np.asarray(poly_cam_mm, dtype=float)
+    Q = np.roll(P, -1, axis=0)
+    a, b = P[:, 2] - z_min_mm, Q[:, 2] - z_min_mm
+    keep_a = a >= 0
+    cross = (a >= 0) != (b >= 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(cross, a / (a - b), 0.0)
+    hits = P + t[:, None] * (Q - P)
+    # Each edge contributes its start vertex (if kept) then its crossing (if any), in order.
+    pts = np.stack([P, hits], axis=1).reshape(-1, 3)
+    mask = np.stack([keep_a, cross], axis=1).reshape(-1)
+    return pts[mask]
+
+
+def blur_radius_norm(aperture_radius_mm: float, focus_distance_mm: float,
+                     depth_mm: np.ndarray) -> np.ndarray:
+    """Thin-lens blur radius in ideal normalised image units, ``r |1/z − 1/s_f|``.
+
+    Parameters
+    ----------
+    aperture_radius_mm : float, >= 0
+        Entrance pupil radius (0: pinhole).
+    focus_distance_mm : float, > 0
+    depth_mm : array, > 0
+        Camera-frame depth ``z`` of the (virtual) points.
+    """
+    z = np.asarray(depth_mm, dtype=float)
+    return float(aperture_radius_mm) * np.abs(1.0 / z - 1.0 / float(focus_distance_mm))
+
+
+def _film_border_px(width: int, height: int) -> np.ndarray:
+    """(n, 2) points every half pixel along the film's outer edge (pixel units, OpenCV)."""
+    u = np.arange(-0.5, width - 0.5 + 1e-9, 0.5)
+    v = np.arange(-0.5, height - 0.5 + 1e-9, 0.5)
+    top = np.column_stack([u, np.full_like(u, -0.5)])
+    bottom = np.column_stack([u, np.full_like(u, height - 0.5)])
+    left = np.column_stack([np.full_like(v, -0.5), v])
+    right = np.column_stack([np.full_like(v, width - 0.5), v])
+    return np.vstack([top, bottom, left, right])
+
+
+def _to_norm(px: np.ndarray, K: np.ndarray, dist) -> np.ndarray:
+    """Ideal normalised coordinates of pixel positions (n, 2)."""
+    yd = (px[:, 1] - K[1, 2]) / K[1, 1]
+    xd = (px[:, 0] - K[0, 2] - K[0, 1] * yd) / K[0, 0]
+    return undistort_normalized(np.column_stack([xd, yd]), dist)
+
+
+def _to_px(xy: np.ndarray, K: np.ndarray, dist) -> np.ndarray:
+    """Pixel positions (n, 2) of ideal normalised coordinates."""
+    d = distort_normalized(xy, dist)
+    return np.column_stack([K[0, 0] * d[:, 0] + K[0, 1] * d[:, 1] + K[0, 2],
+                            K[1, 1] * d[:, 1] + K[1, 2]])
+
+
+def _within(xy: np.ndarray, poly: np.ndarray, rho: float) -> np.ndarray:
+    """Points ``xy`` (n, 2) inside the convex polygon ``poly`` (m, 2) dilated by ``rho``."""
+    a = poly
+    e = np.roll(poly, -1, axis=0) - a
+    if np.sum(a[:, 0] * e[:, 1] - a[:, 1] * e[:, 0]) < 0:  # make it counter-clockwise
+        a = a[::-1]
+        e = np.roll(a, -1, axis=0) - a
+    rel = xy[:, None, :] - a[None, :, :]
+    inside = np.all(e[None, :, 0] * rel[..., 1] - e[None, :, 1] * rel[..., 0] >= 0, axis=1)
+    ee = np.maximum(np.sum(e * e, axis=1), 1e-300)
+    t = np.clip(np.sum(rel * e[None], axis=2) / ee[None], 0.0, 1.0)
+    d2 = np.sum((rel - t[..., None] * e[None]) ** 2, axis=2)
+    return inside | (np.min(d2, axis=1) <= rho * rho)
+
+
+def _stretch(K: np.ndarray, dist, width: int, height: int) -> float:
+    """Largest local magnification of ideal normalised → pixel units over the film (px)."""
+    u, v = np.meshgrid(np.linspace(-0.5, width - 0.5, 17), np.linspace(-0.5, height - 0.5, 17))
+    xy = _to_norm(np.column_stack([u.ravel(), v.ravel()]), K, dist)
+    h = 1e-6
+    J = np.stack([(_to_px(xy + [h, 0.0], K, dist) - _to_px(xy - [h, 0.0], K, dist)) / (2 * h),
+                  (_to_px(xy + [0.0, h], K, dist) - _to_px(xy - [0.0, h], K, dist)) / (2 * h)],
+                 axis=-1)
+    return float(np.max(np.linalg.norm(J, ord=2, axis=(1, 2))))
+
+
+def view_box(poly_cam_mm: np.ndarray, K: np.ndarray, dist, width: int, height: int, *,
+             aperture_radius_mm: float = 0.0, focus_distance_mm: float = 1.0,
+             margin_px: float = SAFETY_MARGIN_PX, stretch: float | None = None
+             ) -> tuple[int, int, int, int] | None:
+    """Pixel box of the film where a planar convex polygon (camera frame) can be seen.
+
+    Parameters
+    ----------
+    poly_cam_mm : (n, 3) float
+        The (virtual) polygon in the OpenCV camera frame, mm.
+    K, dist : intrinsics (px) and Brown distortion ``(k1, k2, p1, p2, k3)``
+    width, height : int
+        Film size, px.
+    aperture_radius_mm, focus_distance_mm : float
+        Thin lens (``aperture_radius_mm = 0``: pinhole).
+    margin_px : float, >= 0
+        Safety margin added on every side, px.
+    stretch : float, optional
+        Largest px per normalised unit over the film (computed when omitted).
+
+    Returns
+    -------
+    (x0, y0, x1, y1) int or None
+        Inclusive pixel bounds clipped to the film, or ``None`` when the polygon cannot
+        touch the film.
+    """
+    K = np.asarray(K, dtype=float)
+    P = clip_near(poly_cam_mm)
+    if len(P) < 3:
+        return None
+    Q = P[:, :2] / P[:, 2:3]
+    rho = float(np.max(blur_radius_norm(aperture_radius_mm, focus_distance_mm, P[:, 2])))
+    if stretch is None:
+        stretch = _stretch(K, dist, width, height)
+    # Boundary samples of Q that land inside the film (distortion is checked to be monotonic
+    # only over the film: a sample beyond the film's largest normalised radius is left out).
+    t = np.arange(_EDGE_SAMPLES) / _EDGE_SAMPLES
+    E = np.roll(Q, -1, axis=0) - Q
+    edge = (Q[:, None, :] + t[None, :, None] * E[:, None, :]).reshape(-1, 2)
+    border = _film_border_px(width, height)
+    border_xy = _to_norm(border, K, dist)
+    r_film = float(np.max(np.hypot(border_xy[:, 0], border_xy[:, 1])))
+    near = np.hypot(edge[:, 0], edge[:, 1]) <= r_film
+    uv = _to_px(edge[near], K, dist)
+    spacing = float(np.max(np.linalg.norm(np.diff(uv, axis=0), axis=1), initial=0.0))
+    spacing = min(spacing, stretch * float(np.max(np.linalg.norm(E, axis=1))) / _EDGE_SAMPLES)
+    inside = (uv[:, 0] >= -0.5) & (uv[:, 0] <= width - 0.5) & (uv[:, 1] >= -0.5) & \
+             (uv[:, 1] <= height - 0.5)
+    pts = np.vstack([uv[inside], border[_within(border_xy, Q, rho)]])
+    if len(pts) == 0:
+        return None
+    pad = rho * stretch + spacing + FILTER_MARGIN_PX + float(margin_px)
+    lo = np.floor(pts.min(axis=0) - pad)
+    hi = np.ceil(pts.max(axis=0) + pad)
+    x0, y0 = int(max(lo[0], 0)), int(max(lo[1], 0))
+    x1, y1 = int(min(hi[0], width - 1)), int(min(hi[1], height - 1))
+    if x1 < x0 or y1 < y0:
+        return None
+    return x0, y0, x1, y1
+
+
+def _intersect(a, b):
+    if a is None or b is None:
+        return None
+    x0, y0 = max(a[0], b[0]), max(a[1], b[1])
+    x1, y1 = min(a[2], b[2]), min(a[3], b[3])
+    return None if x1 < x0 or y1 < y0 else (x0, y0, x1, y1)
+
+
+def merge_boxes(boxes) -> list[tuple[int, int, int, int]]:
+    """Replace overlapping or touching inclusive boxes ``(x0, y0, x1, y1)`` by their bounding
+    box until none overlap; the result covers every input box."""
+    out = [tuple(int(c) for c in b) for b in boxes if b is not None]
+    merged = True
+    while merged:
+        merged = False
+        for i in range(len(out)):
+            for j in range(i + 1, len(out)):
+                a, b = out[i], out[j]
+                if a[0] <= b[2] + 1 and b[0] <= a[2] + 1 and a[1] <= b[3] + 1 and b[1] <= a[3] + 1:
+                    out[i] = (min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3]))
+                    del out[j]
+                    merged = True
+                    break
+            if merged:
+                break
+    return sorted(out)
+
+
+def board_windows(rig, board, *, thin_lens: bool = True, max_bounces: int = 2, scale: float = 1.0,
+                  margin_px: float = SAFETY_MARGIN_PX) -> list[tuple[int, int, int, int]]:
+    """Film windows outside which ``board`` changes nothing in a render of ``rig`` + board.
+
+    Parameters
+    ----------
+    rig : lts360.scenes.rig.Rig
+        Its mirrors as rendered (pass a rig without mirrors for a mirrors-covered shot).
+    board : lts360.scenes.targets.Chessboard
+    thin_lens : bool
+        As :func:`lts360.simulator.render.render_radiance`.
+    max_bounces : int
+        As the renderer's (camera-side mirror reflections followed).
+    scale : float, (0, 1]
+        Image scale, as the renderer's (film and intrinsics scaled alike).
+    margin_px : float
+        Safety margin, px of the (scaled) film.
+
+    Returns
+    -------
+    list of (x, y, width, height) int
+        Disjoint windows of the full film, px (the crop convention of
+        :func:`lts360.simulator.camera_plugin.camera_to_mitsuba`).
+    """
+    cam = rig.camera
+    K = scale_intrinsics(cam.K, scale)
+    dist = np.asarray(cam.distortion, dtype=float)
+    W = max(1, int(round(cam.width_px * scale)))  # as camera_to_mitsuba
+    H = max(1, int(round(cam.height_px * scale)))
+    lens = {"aperture_radius_mm": float(cam.aperture_diameter_mm) / 2.0 if thin_lens else 0.0,
+            "focus_distance_mm": float(cam.focus_distance_mm)}
+    stretch = _stretch(K, dist, W, H)
+    R, t = np.asarray(cam.R, dtype=float), np.asarray(cam.t_mm, dtype=float)
+
+    def box(points_world, T):
+        X = points_world @ T[:3, :3].T + T[:3, 3]
+        return view_box(X @ R.T + t, K, dist, W, H, margin_px=margin_px, stretch=stretch, **lens)
+
+    corners = np.array([[-1, -1, 0, 1], [1, -1, 0, 1], [1, 1, 0, 1], [-1, 1, 0, 1]], float)
+    outline = (corners @ board.rectangle_transform().T)[:, :3]
+    boxes = []
+    for seq, T in mirror_paths(rig.mirrors, max_bounces):
+        b = box(outline, T)
+        # Each mirror of the path, as the camera sees it (through the mirrors after it).
+        for pos, k in enumerate(seq):
+            T_after = np.eye(4)
+            for j in seq[pos + 1:]:
+                T_after = rig.mirrors[j].T @ T_after
+            b = _intersect(b, box(np.asarray(rig.mirrors[k].corners_mm, dtype=float), T_after))
+        boxes.append(b)
+    return [(x0, y0, x1 - x0 + 1, y1 - y0 + 1) for x0, y0, x1, y1 in merge_boxes(boxes)]
