@@ -51,6 +51,7 @@ def quick_run(driver, tmp_path_factory):
     return code, json.loads(out.read_text())
 
 
+@pytest.mark.slow  # the quick LLVM run of every part of the check
 def test_quick_llvm_run_has_every_row_with_sane_values(quick_run):
     code, out = quick_run
     assert code == 0
@@ -77,6 +78,7 @@ def test_quick_llvm_run_has_every_row_with_sane_values(quick_run):
     assert not mc["cut"]
 
 
+@pytest.mark.slow  # the quick LLVM run of every part of the check
 def test_table_prints_every_row_and_no_targets_in_quick_mode(driver, quick_run):
     _, out = quick_run
     text = driver.format_table(out["rows"], quick=True)

@@ -120,6 +120,7 @@ def test_sequential_study_is_stored_and_combined(tmp_path):
     xr.testing.assert_identical(again, ds)
 
 
+@pytest.mark.slow
 def test_process_pool_gives_the_sequential_results(tmp_path):
     sequential = run(tmp_path / "one")
     pooled = run(tmp_path / "two", workers=2)
@@ -184,7 +185,7 @@ def dask_address():
         yield cluster.scheduler_address
 
 
-@pytest.fixture(params=["sequential", "pool", "dask"])
+@pytest.fixture(params=["sequential", pytest.param("pool", marks=pytest.mark.slow), "dask"])
 def executor(request) -> dict:
     """run_study keywords of each way to run trials."""
     if request.param == "dask":

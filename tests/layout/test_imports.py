@@ -7,6 +7,7 @@ import cannot hide a circle.
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import lts360
@@ -24,7 +25,8 @@ def _modules() -> dict[str, Path]:
     return out
 
 
-def import_graph() -> dict[str, set[str]]:
+@functools.lru_cache(maxsize=1)
+def import_graph() -> dict[str, frozenset[str]]:
     """Module → the lts360 modules it imports (``from pkg import submodule`` names the submodule)."""
     mods = _modules()
     graph = {m: set() for m in mods}
@@ -37,7 +39,7 @@ def import_graph() -> dict[str, set[str]]:
                     graph[m].add(node.module)
             elif isinstance(node, ast.Import):
                 graph[m] |= {a.name for a in node.names} & mods.keys()
-    return graph
+    return {m: frozenset(ts) for m, ts in graph.items()}
 
 
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:

@@ -111,6 +111,7 @@ def _tilt_about_image_x_deg(rig, board):
     return np.degrees(np.arctan2(n[1], -n[2]))
 
 
+@pytest.mark.slow
 def test_camera_shots_without_mirrors_tilt_both_ways(rig):
     """With the mirrors in place the accepted camera poses all lean one way about the image
     x axis (a second full board in a mirror refuses the others), which leaves cy and fx

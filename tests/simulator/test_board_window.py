@@ -16,8 +16,8 @@ import pytest
 
 from lts360.scenes.calib_plan import plan_calibration
 from lts360.scenes.rig_io import load_rig
-from lts360.simulator.board_window import (blur_radius_norm, board_windows, clip_near,
-                                           merge_boxes, view_box)
+from lts360.simulator.board_window import (blur_radius_norm, board_pixels, board_windows,
+                                           clip_near, merge_boxes, view_box)
 
 SCALE = 0.125
 
@@ -117,6 +117,12 @@ def test_board_changes_nothing_outside_its_windows(variant, rig, shots, name, mi
     assert changed.sum() > 50  # the board is there
     assert not np.any(changed & ~inside)
     assert inside.mean() < (0.35 if mirrors else 0.6)
+    # The tighter pixel set (each view's padded outline, not its box) holds them too.
+    px = board_pixels(r, board, scale=SCALE, margin_px=0.0)
+    tight = np.zeros_like(inside)
+    tight[px[:, 1], px[:, 0]] = True
+    assert not np.any(changed & ~tight)
+    assert not np.any(tight & ~inside) and tight.sum() <= inside.sum()
     if laser_on:
         assert with_board.laser_W_m2_sr.max() > 0
 

@@ -167,6 +167,7 @@ def test_lambertian_plate_radiance_and_sheet_width(variant, paper):
         assert math.sqrt(var_v) * dz_dv == pytest.approx(w / 2, rel=0.01)
 
 
+@pytest.mark.slow
 def test_mirror_view_is_the_direct_view_times_reflectance(variant, paper):
     """Lambertian gauge: where the direct and the left view overlap, ∫L dz differs by R_mirror."""
     from lts360.simulator.scene import object_meshes

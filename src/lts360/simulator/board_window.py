@@ -27,7 +27,7 @@ import numpy as np
 
 from lts360.geometry.camera import distort_normalized, scale_intrinsics, undistort_normalized
 
-__all__ = ["board_windows", "view_box", "merge_boxes", "mirror_paths", "clip_near",
+__all__ = ["board_windows", "board_pixels", "view_box", "merge_boxes", "mirror_paths", "clip_near",
            "blur_radius_norm", "FILTER_MARGIN_PX", "SAFETY_MARGIN_PX"]
 
 #: Pixel footprint plus Mitsuba's ``box`` filter (radius 0.5 px): a sample lands in its own
@@ -162,8 +162,8 @@ def _stretch(K: np.ndarray, dist, width: int, height: int) -> float:
 
 def view_box(poly_cam_mm: np.ndarray, K: np.ndarray, dist, width: int, height: int, *,
              aperture_radius_mm: float = 0.0, focus_distance_mm: float = 1.0,
-             margin_px: float = SAFETY_MARGIN_PX, stretch: float | None = None
-             ) -> tuple[int, int, int, int] | None:
+             margin_px: float = SAFETY_MARGIN_PX, stretch: float | None = None,
+             outline: bool = False):
     """Pixel box of the film where a planar convex polygon (camera frame) can be seen.
 
     Parameters
@@ -180,16 +180,22 @@ def view_box(poly_cam_mm: np.ndarray, K: np.ndarray, dist, width: int, height: i
     stretch : float, optional
         Largest px per normalised unit over the film (computed when omitted).
 
+    outline : bool
+        Also return the pixels the polygon can touch: its image filled and dilated by the
+        same padding as the box (``None`` where that image is not a closed curve on the film,
+        i.e. part of the polygon lies beyond the film's largest radius: use the box).
+
     Returns
     -------
     (x0, y0, x1, y1) int or None
         Inclusive pixel bounds clipped to the film, or ``None`` when the polygon cannot
-        touch the film.
+        touch the film.  With ``outline``: ``(box, mask)``, ``mask`` a (height, width) bool
+        array or ``None``.
     """
     K = np.asarray(K, dtype=float)
     P = clip_near(poly_cam_mm)
     if len(P) < 3:
-        return None
+        return (None, None) if outline else None
     Q = P[:, :2] / P[:, 2:3]
     rho = float(np.max(blur_radius_norm(aperture_radius_mm, focus_distance_mm, P[:, 2])))
     if stretch is None:
@@ -210,15 +216,34 @@ def view_box(poly_cam_mm: np.ndarray, K: np.ndarray, dist, width: int, height: i
              (uv[:, 1] <= height - 0.5)
     pts = np.vstack([uv[inside], border[_within(border_xy, Q, rho)]])
     if len(pts) == 0:
-        return None
+        return (None, None) if outline else None
     pad = rho * stretch + spacing + FILTER_MARGIN_PX + float(margin_px)
     lo = np.floor(pts.min(axis=0) - pad)
     hi = np.ceil(pts.max(axis=0) + pad)
     x0, y0 = int(max(lo[0], 0)), int(max(lo[1], 0))
     x1, y1 = int(min(hi[0], width - 1)), int(min(hi[1], height - 1))
     if x1 < x0 or y1 < y0:
-        return None
-    return x0, y0, x1, y1
+        return (None, None) if outline else None
+    if not outline:
+        return x0, y0, x1, y1
+    mask = _outline_mask(uv, pad, width, height) if near.all() else None
+    return (x0, y0, x1, y1), mask
+
+
+def _outline_mask(uv: np.ndarray, pad_px: float, width: int, height: int) -> np.ndarray:
+    """Pixels whose centre lies inside the closed curve ``uv`` (dense samples of the polygon's
+    image, px) or within ``pad_px`` (+ 1 px for the fill's rasterisation) of it."""
+    import cv2
+
+    r = int(np.ceil(pad_px)) + 1
+    off = r + 1  # draw on a canvas with a border, so that parts beyond the film count too
+    canvas = np.zeros((height + 2 * off, width + 2 * off), np.uint8)
+    poly = np.rint((uv + off) * 16).astype(np.int32)  # 4 fractional bits
+    cv2.fillPoly(canvas, [poly], 1, lineType=cv2.LINE_8, shift=4)
+    cv2.polylines(canvas, [poly], True, 1, lineType=cv2.LINE_8, shift=4)
+    disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    grown = cv2.dilate(canvas, disk)
+    return grown[off:off + height, off:off + width].astype(bool)
 
 
 def _intersect(a, b):
@@ -300,3 +325,49 @@ def board_windows(rig, board, *, thin_lens: bool = True, max_bounces: int = 2, s
             b = _intersect(b, box(np.asarray(rig.mirrors[k].corners_mm, dtype=float), T_after))
         boxes.append(b)
     return [(x0, y0, x1 - x0 + 1, y1 - y0 + 1) for x0, y0, x1, y1 in merge_boxes(boxes)]
+
+
+def board_pixels(rig, board, *, thin_lens: bool = True, max_bounces: int = 2, scale: float = 1.0,
+                 margin_px: float = SAFETY_MARGIN_PX) -> np.ndarray:
+    """Pixels outside which ``board`` changes nothing: the tighter set of
+    :func:`board_windows` — each view's padded outline of the board (not its bounding box),
+    inside that view's box (clipped to the mirrors it is seen through).
+
+    Returns
+    -------
+    (n, 2) int
+        ``(x, y)`` of each pixel once, row-major.
+    """
+    cam = rig.camera
+    K = scale_intrinsics(cam.K, scale)
+    dist = np.asarray(cam.distortion, dtype=float)
+    W = max(1, int(round(cam.width_px * scale)))
+    H = max(1, int(round(cam.height_px * scale)))
+    lens = {"aperture_radius_mm": float(cam.aperture_diameter_mm) / 2.0 if thin_lens else 0.0,
+            "focus_distance_mm": float(cam.focus_distance_mm)}
+    stretch = _stretch(K, dist, W, H)
+    R, t = np.asarray(cam.R, dtype=float), np.asarray(cam.t_mm, dtype=float)
+
+    def view(points_world, T, outline):
+        X = points_world @ T[:3, :3].T + T[:3, 3]
+        return view_box(X @ R.T + t, K, dist, W, H, margin_px=margin_px, stretch=stretch,
+                        outline=outline, **lens)
+
+    corners = np.array([[-1, -1, 0, 1], [1, -1, 0, 1], [1, 1, 0, 1], [-1, 1, 0, 1]], float)
+    outline = (corners @ board.rectangle_transform().T)[:, :3]
+    covered = np.zeros((H, W), bool)
+    for seq, T in mirror_paths(rig.mirrors, max_bounces):
+        b, mask = view(outline, T, True)
+        for pos, k in enumerate(seq):
+            T_after = np.eye(4)
+            for j in seq[pos + 1:]:
+                T_after = rig.mirrors[j].T @ T_after
+            b = _intersect(b, view(np.asarray(rig.mirrors[k].corners_mm, dtype=float), T_after,
+                                   False))
+        if b is None:
+            continue
+        x0, y0, x1, y1 = b
+        win = np.ones((y1 - y0 + 1, x1 - x0 + 1), bool) if mask is None else mask[y0:y1 + 1, x0:x1 + 1]
+        covered[y0:y1 + 1, x0:x1 + 1] |= win
+    y, x = np.nonzero(covered)
+    return np.column_stack([x, y])

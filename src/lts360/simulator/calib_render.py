@@ -31,8 +31,8 @@ from lts360.scenes.calib_plan import BoardShot
 from lts360.scenes.rig import Rig
 from lts360.simulator.frame import sensor_image
 from lts360.simulator.io import rig_truth, write_json, write_png
-from lts360.simulator.board_window import board_windows
-from lts360.simulator.render import RenderResult, render_pixels, render_radiance, window_pixels
+from lts360.simulator.board_window import board_pixels
+from lts360.simulator.render import RenderResult, render_pixels, render_radiance
 from lts360.simulator.scene import SceneSpec
 
 __all__ = ["render_calibration_images", "MANIFEST_NAME"]
@@ -88,7 +88,7 @@ def _render(rig, board, *, laser_on, spp, seed, thin_lens, mirrors=True, context
                                        seed=CONTEXT_SEED, thin_lens=thin_lens, laser_on=False,
                                        scale=scale)
         seconds = context[key].seconds
-    px = window_pixels(board_windows(scene_rig, board, thin_lens=thin_lens, scale=scale))
+    px = board_pixels(scene_rig, board, thin_lens=thin_lens, scale=scale)
     rad, las, sec = render_pixels(spec, px, spp=spp, seed=seed, thin_lens=thin_lens,
                                   laser_on=laser_on, scale=scale)
     return composite(context[key], px, rad, las, seconds=seconds + sec, seed=seed)

@@ -113,6 +113,7 @@ def test_refine_mirror_leaves_out_a_shifted_column_of_corners():
     assert naive[1] > 30.0
 
 
+@pytest.mark.slow
 def test_an_image_with_wrong_virtual_corners_is_discarded():
     """One image whose virtual board is matched in the wrong order (its columns reversed; a
     laser shot at f/8 gave a pair this wrong, 5 px RMS): every corner of it is an outlier,

@@ -40,8 +40,8 @@ TOLERANCE = {
 }
 
 
-#: One round, one faceted and one stranded object in the fast tier; the rest with -m slow.
-FAST = ("plug-gauge", "cube", "cable-8")
+#: The gauge in the fast tier; every object with -m slow.
+FAST = ("plug-gauge",)
 
 
 @pytest.mark.parametrize("name", [n if n in FAST else pytest.param(n, marks=pytest.mark.slow)
