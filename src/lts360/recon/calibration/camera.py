@@ -9,6 +9,7 @@ are discarded and the calibration is repeated, as the paper does.  No ground tru
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -199,20 +200,25 @@ def detect_corners(image, board: BoardGeometry, *, symmetrize: bool = True,
     from scipy.spatial import cKDTree
 
     im8 = _to_u8(image)
-    corners = _sb_corners(im8, board)
+    if refine or not symmetrize:
+        corners = _sb_corners(im8, board)
+        if corners is None or not refine:
+            return corners
+        return _refine_saddle(im8, corners, board)
+    h, w = im8.shape[:2]
+    backs = (lambda c: np.column_stack([w - 1 - c[:, 0], c[:, 1]]),
+             lambda c: np.column_stack([c[:, 0], h - 1 - c[:, 1]]),
+             lambda c: np.column_stack([w - 1 - c[:, 0], h - 1 - c[:, 1]]))
+    views = [im8] + [np.ascontiguousarray(f) for f in (im8[:, ::-1], im8[::-1, :], im8[::-1, ::-1])]
+    # The four detections are independent; OpenCV releases the GIL, so two threads overlap
+    # them (a quarter less wall time on two cores; the same corners).
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        detected = list(pool.map(lambda im: _sb_corners(im, board), views))
+    corners = detected[0]
     if corners is None:
         return None
-    if refine:
-        return _refine_saddle(im8, corners, board)
-    if not symmetrize:
-        return corners
-    h, w = im8.shape[:2]
     found = [corners]
-    for flip, back in ((im8[:, ::-1], lambda c: np.column_stack([w - 1 - c[:, 0], c[:, 1]])),
-                       (im8[::-1, :], lambda c: np.column_stack([c[:, 0], h - 1 - c[:, 1]])),
-                       (im8[::-1, ::-1], lambda c: np.column_stack([w - 1 - c[:, 0],
-                                                                    h - 1 - c[:, 1]]))):
-        c = _sb_corners(np.ascontiguousarray(flip), board)
+    for c, back in zip(detected[1:], backs):
         if c is None:
             continue
         c = back(c)
