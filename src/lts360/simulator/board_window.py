@@ -274,6 +274,42 @@ def merge_boxes(boxes) -> list[tuple[int, int, int, int]]:
     return sorted(out)
 
 
+def _path_views(rig, board, *, thin_lens: bool, max_bounces: int, scale: float,
+                margin_px: float, outline: bool):
+    """For every mirror path the renderer follows: the film box where the board can be seen
+    along it (clipped to the mirrors it goes through) and, with ``outline``, the board's padded
+    outline on the film (``None`` where only the box is known).  Also returns the film size."""
+    cam = rig.camera
+    K = scale_intrinsics(cam.K, scale)
+    dist = np.asarray(cam.distortion, dtype=float)
+    W = max(1, int(round(cam.width_px * scale)))  # as camera_to_mitsuba
+    H = max(1, int(round(cam.height_px * scale)))
+    lens = {"aperture_radius_mm": float(cam.aperture_diameter_mm) / 2.0 if thin_lens else 0.0,
+            "focus_distance_mm": float(cam.focus_distance_mm)}
+    stretch = _stretch(K, dist, W, H)
+    R, t = np.asarray(cam.R, dtype=float), np.asarray(cam.t_mm, dtype=float)
+
+    def view(points_world, T, with_outline):
+        X = points_world @ T[:3, :3].T + T[:3, 3]
+        return view_box(X @ R.T + t, K, dist, W, H, margin_px=margin_px, stretch=stretch,
+                        outline=with_outline, **lens)
+
+    corners = np.array([[-1, -1, 0, 1], [1, -1, 0, 1], [1, 1, 0, 1], [-1, 1, 0, 1]], float)
+    board_outline = (corners @ board.rectangle_transform().T)[:, :3]
+    out = []
+    for seq, T in mirror_paths(rig.mirrors, max_bounces):
+        b, mask = view(board_outline, T, True) if outline else (view(board_outline, T, False), None)
+        # Each mirror of the path, as the camera sees it (through the mirrors after it).
+        for pos, k in enumerate(seq):
+            T_after = np.eye(4)
+            for j in seq[pos + 1:]:
+                T_after = rig.mirrors[j].T @ T_after
+            b = _intersect(b, view(np.asarray(rig.mirrors[k].corners_mm, dtype=float), T_after,
+                                   False))
+        out.append((b, mask))
+    return out, (W, H)
+
+
 def board_windows(rig, board, *, thin_lens: bool = True, max_bounces: int = 2, scale: float = 1.0,
                   margin_px: float = SAFETY_MARGIN_PX) -> list[tuple[int, int, int, int]]:
     """Film windows outside which ``board`` changes nothing in a render of ``rig`` + board.
@@ -298,76 +334,30 @@ def board_windows(rig, board, *, thin_lens: bool = True, max_bounces: int = 2, s
         Disjoint windows of the full film, px (the crop convention of
         :func:`lts360.simulator.camera_plugin.camera_to_mitsuba`).
     """
-    cam = rig.camera
-    K = scale_intrinsics(cam.K, scale)
-    dist = np.asarray(cam.distortion, dtype=float)
-    W = max(1, int(round(cam.width_px * scale)))  # as camera_to_mitsuba
-    H = max(1, int(round(cam.height_px * scale)))
-    lens = {"aperture_radius_mm": float(cam.aperture_diameter_mm) / 2.0 if thin_lens else 0.0,
-            "focus_distance_mm": float(cam.focus_distance_mm)}
-    stretch = _stretch(K, dist, W, H)
-    R, t = np.asarray(cam.R, dtype=float), np.asarray(cam.t_mm, dtype=float)
-
-    def box(points_world, T):
-        X = points_world @ T[:3, :3].T + T[:3, 3]
-        return view_box(X @ R.T + t, K, dist, W, H, margin_px=margin_px, stretch=stretch, **lens)
-
-    corners = np.array([[-1, -1, 0, 1], [1, -1, 0, 1], [1, 1, 0, 1], [-1, 1, 0, 1]], float)
-    outline = (corners @ board.rectangle_transform().T)[:, :3]
-    boxes = []
-    for seq, T in mirror_paths(rig.mirrors, max_bounces):
-        b = box(outline, T)
-        # Each mirror of the path, as the camera sees it (through the mirrors after it).
-        for pos, k in enumerate(seq):
-            T_after = np.eye(4)
-            for j in seq[pos + 1:]:
-                T_after = rig.mirrors[j].T @ T_after
-            b = _intersect(b, box(np.asarray(rig.mirrors[k].corners_mm, dtype=float), T_after))
-        boxes.append(b)
-    return [(x0, y0, x1 - x0 + 1, y1 - y0 + 1) for x0, y0, x1, y1 in merge_boxes(boxes)]
+    views, _ = _path_views(rig, board, thin_lens=thin_lens, max_bounces=max_bounces, scale=scale,
+                           margin_px=margin_px, outline=False)
+    return [(x0, y0, x1 - x0 + 1, y1 - y0 + 1)
+            for x0, y0, x1, y1 in merge_boxes(b for b, _ in views)]
 
 
 def board_pixels(rig, board, *, thin_lens: bool = True, max_bounces: int = 2, scale: float = 1.0,
                  margin_px: float = SAFETY_MARGIN_PX) -> np.ndarray:
     """Pixels outside which ``board`` changes nothing: the tighter set of
     :func:`board_windows` — each view's padded outline of the board (not its bounding box),
-    inside that view's box (clipped to the mirrors it is seen through).
+    inside that view's box (clipped to the mirrors it is seen through).  Same parameters.
 
     Returns
     -------
     (n, 2) int
         ``(x, y)`` of each pixel once, row-major.
     """
-    cam = rig.camera
-    K = scale_intrinsics(cam.K, scale)
-    dist = np.asarray(cam.distortion, dtype=float)
-    W = max(1, int(round(cam.width_px * scale)))
-    H = max(1, int(round(cam.height_px * scale)))
-    lens = {"aperture_radius_mm": float(cam.aperture_diameter_mm) / 2.0 if thin_lens else 0.0,
-            "focus_distance_mm": float(cam.focus_distance_mm)}
-    stretch = _stretch(K, dist, W, H)
-    R, t = np.asarray(cam.R, dtype=float), np.asarray(cam.t_mm, dtype=float)
-
-    def view(points_world, T, outline):
-        X = points_world @ T[:3, :3].T + T[:3, 3]
-        return view_box(X @ R.T + t, K, dist, W, H, margin_px=margin_px, stretch=stretch,
-                        outline=outline, **lens)
-
-    corners = np.array([[-1, -1, 0, 1], [1, -1, 0, 1], [1, 1, 0, 1], [-1, 1, 0, 1]], float)
-    outline = (corners @ board.rectangle_transform().T)[:, :3]
+    views, (W, H) = _path_views(rig, board, thin_lens=thin_lens, max_bounces=max_bounces,
+                                scale=scale, margin_px=margin_px, outline=True)
     covered = np.zeros((H, W), bool)
-    for seq, T in mirror_paths(rig.mirrors, max_bounces):
-        b, mask = view(outline, T, True)
-        for pos, k in enumerate(seq):
-            T_after = np.eye(4)
-            for j in seq[pos + 1:]:
-                T_after = rig.mirrors[j].T @ T_after
-            b = _intersect(b, view(np.asarray(rig.mirrors[k].corners_mm, dtype=float), T_after,
-                                   False))
+    for b, mask in views:
         if b is None:
             continue
         x0, y0, x1, y1 = b
-        win = np.ones((y1 - y0 + 1, x1 - x0 + 1), bool) if mask is None else mask[y0:y1 + 1, x0:x1 + 1]
-        covered[y0:y1 + 1, x0:x1 + 1] |= win
+        covered[y0:y1 + 1, x0:x1 + 1] |= True if mask is None else mask[y0:y1 + 1, x0:x1 + 1]
     y, x = np.nonzero(covered)
     return np.column_stack([x, y])
