@@ -157,6 +157,36 @@ def _sb_corners(im8: np.ndarray, board: BoardGeometry) -> np.ndarray | None:
     return corners.reshape(-1, 2).astype(np.float64) if ok else None
 
 
+def _board_crop(im8: np.ndarray, board: BoardGeometry, *, margin_squares: float = 1.5,
+                margin_px: int = 16) -> tuple[np.ndarray, np.ndarray]:
+    """The part of ``im8`` around the board, and its origin ``(x0, y0)`` in px.
+
+    SB without ``CALIB_CB_ACCURACY`` on the image at half size locates the board (a tenth of
+    the accurate detector's time); the crop adds ``margin_squares`` corner spacings and
+    ``margin_px`` around the corners found.  The accurate detector then runs on a fraction of
+    the pixels: measured on the 30 camera boards of the demo (1280 × 1024, 64 spp, realistic
+    noise), symmetrized corners against their true projections 0.0463 px RMS on the crop as
+    on the whole image, the mean offset within 0.0005 px, in a third of the time.  Where the
+    coarse pass finds no board, the whole image is returned."""
+    import cv2
+
+    h, w = im8.shape[:2]
+    small = cv2.resize(im8, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
+    ok, coarse = cv2.findChessboardCornersSB(small, tuple(board.pattern_size), flags=0)
+    if not ok:
+        return im8, np.zeros(2)
+    c = coarse.reshape(-1, 2).astype(np.float64) * 2.0 + 0.5  # half-size px -> px
+    nx, ny = board.pattern_size
+    g = c.reshape(ny, nx, 2)
+    spacing = max(np.linalg.norm(np.diff(g, axis=1), axis=2).max(),
+                  np.linalg.norm(np.diff(g, axis=0), axis=2).max())
+    m = margin_squares * spacing + margin_px
+    x0, y0 = (max(int(np.floor(v - m)), 0) for v in c.min(axis=0))
+    x1 = min(int(np.ceil(c[:, 0].max() + m)) + 1, w)
+    y1 = min(int(np.ceil(c[:, 1].max() + m)) + 1, h)
+    return np.ascontiguousarray(im8[y0:y1, x0:x1]), np.array([x0, y0], float)
+
+
 def _refine_saddle(im8: np.ndarray, corners: np.ndarray, board: BoardGeometry, *,
                    window_fraction: float = 0.4, max_move_px: float = 1.0) -> np.ndarray:
     """``cornerSubPix`` on every corner, with a window of ``window_fraction`` of the shortest
@@ -197,14 +227,26 @@ def detect_corners(image, board: BoardGeometry, *, symmetrize: bool = True,
         SB shifts the outer ring of corners outwards by 0.04–0.07 px on average (the real
         boards: 0.00), which moved the mirror planes by tens of µm.  The mirror shots use it.
     """
+    full = _to_u8(image)
+    im8, origin = _board_crop(full, board)
+    corners = _detect_in(im8, board, symmetrize=symmetrize and not refine)
+    if corners is None and im8 is not full:  # the crop lost it: the whole image
+        im8, origin = full, np.zeros(2)
+        corners = _detect_in(im8, board, symmetrize=symmetrize and not refine)
+    if corners is None:
+        return None
+    if refine:
+        return _refine_saddle(full, corners + origin, board)
+    return corners + origin
+
+
+def _detect_in(im8: np.ndarray, board: BoardGeometry, *, symmetrize: bool) -> np.ndarray | None:
+    """SB's corners in ``im8``; ``symmetrize``: averaged over the image and its three flips
+    (see :func:`detect_corners`)."""
     from scipy.spatial import cKDTree
 
-    im8 = _to_u8(image)
-    if refine or not symmetrize:
-        corners = _sb_corners(im8, board)
-        if corners is None or not refine:
-            return corners
-        return _refine_saddle(im8, corners, board)
+    if not symmetrize:
+        return _sb_corners(im8, board)
     h, w = im8.shape[:2]
     backs = (lambda c: np.column_stack([w - 1 - c[:, 0], c[:, 1]]),
              lambda c: np.column_stack([c[:, 0], h - 1 - c[:, 1]]),

@@ -283,20 +283,45 @@ def refine_mirror(observations, board: BoardGeometry, K, dist,
         n = np.array([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)])
         return n, d, x[3:].reshape(-1, 6)
 
+    real_px = np.stack([ob.real_px for ob in observations])  # (m, N, 2)
+    virtual_px = np.stack([ob.virtual_px for ob in observations])
+    m_obs, n_pts = real_px.shape[:2]
+
     def residuals(x):
         n, d, ps = unpack(x)
-        out = []
-        for ob, p in zip(observations, ps):
-            X = _transform(obj, p[:3], p[3:])
-            out.append((project_camera_points(X, K, dist) - ob.real_px).ravel())
-            out.append((project_camera_points(_mirror_points(X, n, d), K, dist) - ob.virtual_px).ravel())
-        return np.concatenate(out)
+        X = np.stack([_transform(obj, p[:3], p[3:]) for p in ps]).reshape(-1, 3)
+        real = project_camera_points(X, K, dist).reshape(m_obs, n_pts, 2) - real_px
+        virt = (project_camera_points(_mirror_points(X, n, d), K, dist).reshape(m_obs, n_pts, 2)
+                - virtual_px)
+        return np.stack([real, virt], axis=1).ravel()  # per image: its real, then virtual
+
+    # Forward differences with the columns grouped by the rows they touch: a board's pose
+    # moves only that board's residuals, so one evaluation perturbs the same pose parameter
+    # of every board (3 + 6 evaluations per Jacobian instead of 3 + 6 m).
+    rows_per_obs = 4 * n_pts
+    groups = [[j] for j in range(3)] + [[3 + 6 * i + k for i in range(m_obs)] for k in range(6)]
+
+    def jacobian(x, f0, w2):
+        J = np.zeros((f0.size, x.size))
+        for cols in groups:
+            h = np.sqrt(np.finfo(float).eps) * np.maximum(1.0, np.abs(x[cols]))
+            xp = x.copy()
+            xp[cols] += h
+            df = (residuals(xp) * w2 - f0)
+            if len(cols) == 1 and cols[0] < 3:
+                J[:, cols[0]] = df / h[0]
+            else:
+                for i, (j, hj) in enumerate(zip(cols, h)):
+                    r = slice(i * rows_per_obs, (i + 1) * rows_per_obs)
+                    J[r, j] = df[r] / hj
+        return J
 
     weight = np.ones(2 * len(observations) * len(obj))  # per corner: real, virtual per image
     sol = None
     for _ in range(6):  # until the corners left out no longer change
         w2 = np.repeat(weight, 2)
-        sol = least_squares(lambda x: residuals(x) * w2, x0 if sol is None else sol.x,
+        sol = least_squares(lambda x, w2=w2: residuals(x) * w2, x0 if sol is None else sol.x,
+                            jac=lambda x, w2=w2: jacobian(x, residuals(x) * w2, w2),
                             method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
         err = np.linalg.norm(residuals(sol.x).reshape(-1, 2), axis=1)
         if corner_outlier_px is None:
