@@ -132,3 +132,31 @@ def test_scalar_variant_renders_a_tiny_frame():
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "(51, 64) True" in proc.stdout
+
+
+def test_frame_rendered_on_a_pixel_window(variant):
+    # Only the listed pixels are rendered (the rest is dark); their values have the statistics
+    # of a full render's (another Monte Carlo realisation of the same expectation).
+    from lts360.simulator.frame import simulate_frame
+
+    rig = load_rig("paper")
+    obj = build_object("plug-gauge")
+    full = simulate_frame(rig, obj, spp=16, seed=2, noise="none", scale=0.25)
+    lit = np.argwhere(full.render.laser_W_m2_sr > 0)[:, ::-1]  # (x, y) of the stripe
+    ys, xs = np.mgrid[0:full.image.shape[0], 0:full.image.shape[1]]
+    near = np.zeros(full.image.shape, bool)
+    near[lit[:, 1], lit[:, 0]] = True
+    from scipy.ndimage import binary_dilation
+
+    near = binary_dilation(near, iterations=3)
+    px = np.column_stack([xs[near], ys[near]])
+    win = simulate_frame(rig, obj, spp=16, seed=2, noise="none", scale=0.25, pixels_xy=px)
+    assert win.truth["render"]["pixels"] == len(px)
+    assert np.all(win.render.radiance_W_m2_sr[~near] == 0)
+    a, b = full.render.laser_W_m2_sr[near], win.render.laser_W_m2_sr[near]
+    # The stripe's total laser radiance agrees to the Monte Carlo noise of 16 spp (~1 %).
+    assert abs(b.sum() / a.sum() - 1.0) < 0.02
+    assert np.corrcoef(a, b)[0, 1] > 0.95
+    with pytest.raises(ValueError, match="inside"):
+        simulate_frame(rig, obj, spp=1, seed=2, noise="none", scale=0.25,
+                       pixels_xy=np.array([[10_000, 0]]))

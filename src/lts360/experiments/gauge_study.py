@@ -90,6 +90,29 @@ def _cached_plan(cal_path: str, version: tuple, r_mm: float, band_mm: float,
         return cal, grid, plan_inverse(cal, grid, precompute=True)
 
 
+@functools.lru_cache(maxsize=4)
+def _window_pixels(cal_path: str, version: tuple, r_mm: float, band_mm: float,
+                   theta_step_deg: float, r_step_mm: float) -> np.ndarray:
+    """The pixels :func:`measure_gauge_image` reads with this calibration (the trials render
+    only these: the band's projection in every view, a fifth of the image)."""
+    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.inverse import plan_inverse, plan_pixels
+
+    grid = CylGrid.from_ranges((r_mm - band_mm, r_mm + band_mm), theta_step_deg=theta_step_deg,
+                               r_step_mm=r_step_mm)
+    return plan_pixels(plan_inverse(load_calibration(cal_path), grid, precompute=False))
+
+
+def gauge_window_pixels(cal_path, r_mm: float, *, band_mm: float = 1.0,
+                        theta_step_deg: float = 0.1, r_step_mm: float = 0.005) -> np.ndarray:
+    """(n, 2) int: the pixels a gauge of radius ``r_mm`` is measured from with the
+    calibration ``cal_path`` (see :func:`measure_gauge_image`)."""
+    st = os.stat(cal_path)
+    return _window_pixels(str(cal_path), (st.st_mtime_ns, st.st_size), float(r_mm),
+                          float(band_mm), float(theta_step_deg), float(r_step_mm))
+
+
 def measure_gauge_image(image, cal_path: str, *, r_true_mm: float, band_mm: float = 1.0,
                         theta_step_deg: float = 0.1, r_step_mm: float = 0.005,
                         compensate: bool = True, cloud_path=None) -> dict:
@@ -150,10 +173,13 @@ def plug_gauge_trial(trial: Trial) -> TrialOutput:
     if mi.variant() is None:
         mi.set_variant(p.get("variant", "llvm_ad_mono"))
     obj = build_object(p["spec"])
+    r_mm = obj.params["diameter_mm"] / 2
+    # Only the pixels the measurement reads are rendered (the rest of the image is not used).
     frame = simulate_frame(load_rig(p["rig"]), obj, spp=int(p["spp"]), seed=trial.seed,
-                           noise=p["noise"])
+                           noise=p["noise"],
+                           pixels_xy=gauge_window_pixels(p["calibration"], r_mm))
     cloud = Path(p["clouds"]) / f"placement_{trial.index:02d}.ply" if p.get("clouds") else None
-    m = measure_gauge_image(frame.image, p["calibration"], r_true_mm=obj.params["diameter_mm"] / 2,
+    m = measure_gauge_image(frame.image, p["calibration"], r_true_mm=r_mm,
                             compensate=bool(p["compensate"]), cloud_path=cloud)
     arrays = {k: m.pop(k) for k in ("view_mean_mm", "view_std_mm", "view_n") if k in m}
     values = {k: float(v) for k, v in m.items()}
@@ -240,7 +266,8 @@ def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str,
     grid = CylGrid.from_ranges((r - 1.0, r + 1.0), theta_step_deg=0.1, r_step_mm=0.005)
     results = []
     for k in range(int(shots)):
-        frame = simulate_frame(load_rig(rig), obj, spp=spp, seed=seed + 777_777 + k, noise=noise)
+        frame = simulate_frame(load_rig(rig), obj, spp=spp, seed=seed + 777_777 + k, noise=noise,
+                               pixels_xy=gauge_window_pixels(cal_path, r))
         results.append(inverse_triangulate(frame.image, cal, grid))
     offsets = joint_view_offsets(results)
     cal = dataclasses.replace(cal, view_offsets_mm=offsets)

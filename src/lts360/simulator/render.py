@@ -14,7 +14,8 @@ import numpy as np
 from lts360.geometry.camera import scale_intrinsics
 from lts360.simulator.scene import SceneSpec, load_scene
 
-__all__ = ["RenderResult", "render_radiance", "render_pixels", "window_pixels", "require_variant",
+__all__ = ["RenderResult", "render_radiance", "render_pixels", "render_radiance_pixels",
+           "window_pixels", "require_variant",
            "default_variant"]
 
 VARIANTS = ("llvm_ad_mono", "cuda_ad_mono", "scalar_mono", "scalar_rgb", "llvm_ad_rgb", "cuda_ad_rgb")
@@ -225,6 +226,32 @@ def render_radiance(spec: SceneSpec, *, spp: int = 4, seed: int = 0, scale: floa
     return RenderResult(radiance_W_m2_sr=np.ascontiguousarray(radiance),
                         laser_W_m2_sr=np.ascontiguousarray(laser), K=K, variant=variant, spp=spp,
                         seed=seed, seconds=seconds)
+
+
+def render_radiance_pixels(spec: SceneSpec, pixels_xy, **kwargs) -> RenderResult:
+    """A full-size :class:`RenderResult` of which only ``pixels_xy`` are rendered
+    (:func:`render_pixels`); every other pixel is 0 (no light).
+
+    For callers that read a known part of the image only (a study measuring a section in a
+    band the calibration predicts): the rendered pixels have the statistics of a full
+    render's, at the cost of the pixels listed.  Keyword arguments as :func:`render_pixels`.
+    """
+    scale = float(kwargs.get("scale", 1.0))
+    cam = spec.rig.camera
+    w = max(1, int(round(cam.width_px * scale)))  # as the camera plugin's film
+    h = max(1, int(round(cam.height_px * scale)))
+    px = np.asarray(pixels_xy, dtype=np.int64).reshape(-1, 2)
+    if len(px) and (px.min() < 0 or np.any(px.max(axis=0) >= (w, h))):
+        raise ValueError(f"pixels_xy must lie inside the {w} x {h} film")
+    rad, las, seconds = render_pixels(spec, px, **kwargs)
+    radiance = np.zeros((h, w), np.float32)
+    laser = np.zeros((h, w), np.float32)
+    radiance[px[:, 1], px[:, 0]] = rad
+    laser[px[:, 1], px[:, 0]] = las
+    return RenderResult(radiance_W_m2_sr=radiance, laser_W_m2_sr=laser,
+                        K=scale_intrinsics(cam.K, scale), variant=require_variant(),
+                        spp=int(kwargs.get("spp", 4)), seed=int(kwargs.get("seed", 0)),
+                        seconds=seconds)
 
 
 def _luminance(rgb: np.ndarray) -> np.ndarray:

@@ -202,6 +202,28 @@ def test_residual_compensation_of_a_mirror_calibration_error(paper, cal, grid, g
     assert np.allclose(again["left"], offsets["left"], atol=1e-9)
 
 
+def test_plan_pixels_are_all_the_inverse_triangulation_reads(cal, grid, gauge_image):
+    # Zero every pixel outside plan_pixels: the profiles, hence the result, do not change.
+    from lts360.recon.triangulation.inverse import plan_pixels, sample_profiles
+
+    img, _ = gauge_image
+    plan = plan_inverse(cal, grid, precompute=False)
+    px = plan_pixels(plan, margin_px=0)
+    assert len(np.unique(px[:, 1] * 10_000 + px[:, 0])) == len(px)  # each pixel once
+    w, h = cal.image_size
+    assert len(px) < 0.5 * w * h  # a band, not the image
+    masked = np.zeros_like(img)
+    masked[px[:, 1], px[:, 0]] = img[px[:, 1], px[:, 0]]
+    for vp in plan.views.values():
+        np.testing.assert_array_equal(sample_profiles(masked, vp), sample_profiles(img, vp))
+    wider = plan_pixels(plan, margin_px=3)
+    assert len(wider) > len(px)
+    keys = set((wider[:, 1] * 10_000 + wider[:, 0]).tolist())
+    assert keys.issuperset((px[:, 1] * 10_000 + px[:, 0]).tolist())
+    with pytest.raises(ValueError, match="margin_px"):
+        plan_pixels(plan, margin_px=-1)
+
+
 def test_bad_inputs(cal, grid):
     with pytest.raises(ValueError, match="image"):
         inverse_triangulate(np.zeros((10, 10)), cal, grid)

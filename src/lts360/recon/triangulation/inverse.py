@@ -39,7 +39,7 @@ from lts360.recon.triangulation.views import (DEFAULT_MAX_INCIDENCE_DEG, DIRECT,
                                 project_meas_points, view_windows)
 
 __all__ = ["ViewPlan", "InversePlan", "ViewResult", "FusedCloud", "InverseResult", "raw_view_points",
-           "plan_inverse", "project_grid", "sample_profiles", "assemble_view",
+           "plan_inverse", "plan_pixels", "project_grid", "sample_profiles", "assemble_view",
            "inverse_triangulate", "estimate_view_offsets", "default_threshold",
            "default_saturation", "DEFAULT_ACCEPT", "DEFAULT_THRESHOLD_FRACTION"]
 
@@ -206,6 +206,34 @@ def plan_inverse(cal: Calibration, grid: CylGrid, *, views=None, windows=None,
 
 
 # -- stage 2: sampling -------------------------------------------------------------------------
+
+def plan_pixels(plan: InversePlan, *, margin_px: int = 4) -> np.ndarray:
+    """(n, 2) int ``(x, y)``: every pixel the plan's cubic samples read (the 4 × 4
+    neighbourhood of each grid point's projection), widened by ``margin_px``, inside the
+    image; row-major, each once.
+
+    What a simulation must render for this plan to measure as it would on the full image
+    (the margin keeps the pixels that speckle and defocus couple to the read ones)."""
+    if margin_px < 0:
+        raise ValueError(f"margin_px must be >= 0, got {margin_px}")
+    w, h = plan.cal.image_size
+    mask = np.zeros((h, w), bool)
+    for vp in plan.views.values():
+        uv = vp.uv.reshape(-1, 2)
+        uv = uv[np.all(np.isfinite(uv), axis=1)]
+        base = np.floor(uv).astype(np.int64)
+        ok = (base[:, 0] >= -2) & (base[:, 0] < w + 1) & (base[:, 1] >= -2) & (base[:, 1] < h + 1)
+        base = base[ok]
+        mask[np.clip(base[:, 1], 0, h - 1), np.clip(base[:, 0], 0, w - 1)] = True
+    # floor(u) - 1 ... floor(u) + 2, then the margin: a box of half-widths (1 + m, 2 + m)
+    # about the marked pixel, made symmetric (one pixel more on the left and top).
+    r = 2 + int(margin_px)
+    from scipy.ndimage import binary_dilation
+
+    mask = binary_dilation(mask, structure=np.ones((2 * r + 1, 2 * r + 1), bool))
+    ys, xs = np.nonzero(mask)
+    return np.column_stack([xs, ys])
+
 
 def sample_profiles(image: np.ndarray, view_plan: ViewPlan) -> np.ndarray:
     """Intensity profiles of one view: (k, nr) float, NaN where the grid leaves the image."""
