@@ -86,8 +86,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--peak", choices=("centroid", "gauss", "steger"), default="centroid")
     s.add_argument("--theta-step-deg", type=float, default=0.1)
     s.add_argument("--r-step-mm", type=float, default=0.005)
-    s.add_argument("--radius-mm", type=float, default=10.0, help="nominal radius (default 10)")
-    s.add_argument("--band-mm", type=float, default=2.0, help="radial search band ± (default 2)")
+    s.add_argument("--radius-mm", type=float, default=None,
+                   help="nominal radius: search the fixed band radius ± --band-mm about the axis "
+                        "(default: find the band from the image, over every radius the rig can "
+                        "image; the classic method then uses 10)")
+    s.add_argument("--band-mm", type=float, default=None,
+                   help="radial search band ±: about --radius-mm (default 2), or about the "
+                        "profile found from the image (default 1)")
     s.add_argument("--pitch-mm", type=float, default=None, help="stage pitch for bare images")
     s.add_argument("--compensate", action="store_true",
                    help="apply the calibration's residual compensation (paper §4.4)")

@@ -271,7 +271,7 @@ def seen_through_mirrors(cal: Calibration, view: View, points_meas_mm) -> np.nda
 
 def view_windows(cal: Calibration, radius_range_mm, theta_rad, max_incidence_deg: float =
                  DEFAULT_MAX_INCIDENCE_DEG, *, views=None, n_radii: int = DEFAULT_WINDOW_RADII,
-                 margin_px: float = 0.0) -> dict[str, np.ndarray]:
+                 margin_px: float = 0.0, normal_angle_rad=None) -> dict[str, np.ndarray]:
     """Per-view θ windows derived from the calibration (see the module docstring).
 
     Parameters
@@ -288,6 +288,10 @@ def view_windows(cal: Calibration, radius_range_mm, theta_rad, max_incidence_deg
         Default: direct and every single-mirror view.
     n_radii : int, >= 1
     margin_px : float, >= 0
+    normal_angle_rad : (nθ,) float, optional
+        Direction of the surface's outward normal in the laser plane at each θ (default θ:
+        a section centred on the axis); from a first-pass profile ``r(θ)`` it is
+        ``θ − atan(r′/r)``, which keeps the facing test right for a part off the axis.
 
     Returns
     -------
@@ -309,14 +313,18 @@ def view_windows(cal: Calibration, radius_range_mm, theta_rad, max_incidence_deg
     mirrors = _mirrors_in_meas(cal)
     camera = cal.T_meas_cam[:3, 3].copy()  # camera centre in the measurement frame
     cos_max = np.cos(np.radians(max_incidence_deg))
-    normal = np.stack([np.cos(theta), np.sin(theta), np.zeros_like(theta)], axis=-1)
+    radial = np.stack([np.cos(theta), np.sin(theta), np.zeros_like(theta)], axis=-1)
+    psi = theta if normal_angle_rad is None else np.asarray(normal_angle_rad, float).ravel()
+    if psi.shape != theta.shape:
+        raise ValueError(f"normal_angle_rad must have shape {theta.shape}, got {psi.shape}")
+    normal = np.stack([np.cos(psi), np.sin(psi), np.zeros_like(psi)], axis=-1)
     w, h = cal.image_size
     radii = np.linspace(r0, r1, n_radii) if n_radii > 1 else (0.5 * (r0 + r1))[None]
     out = {}
     for view in view_list:
         ok = np.ones(theta.size, dtype=bool)
         for r in radii:
-            pts = normal * r[:, None]
+            pts = radial * r[:, None]
             path, leave = _path_ok(pts, camera, view.mirrors, mirrors, r)
             ok &= path & (np.einsum("ij,ij->i", leave, normal) > cos_max)
             uv = project_meas_points(pts, cal, view)
