@@ -12,7 +12,8 @@ stripe on its radial line; :func:`follow_profile` turns those candidates into on
 2. a running median along θ (±3 coarse steps), robust to a view's isolated wrong pick (a
    reflection, a stripe of another view that its radial line crosses);
 3. candidates farther than ``outlier_mm`` from it are dropped and steps 1–2 repeated;
-4. θ with no candidate are filled by linear interpolation along θ (periodic on a full turn).
+4. θ with no candidate are filled by linear interpolation along θ (periodic on a full turn),
+   and a ±1-step moving average smooths the median's staircase.
 
 The fine grid is then ``r₀(θ) ± half_width`` per θ (:meth:`CylGrid.following`) and each
 view's θ window is derived with the profile's own surface normal (``θ − atan(r₀′/r₀)``), so a
@@ -110,7 +111,8 @@ class Profile:
     def normal_angle_at(self, theta_rad) -> np.ndarray:
         """Direction of the outward normal of the curve ``r₀(θ)``: ``θ − atan(r₀′ / r₀)``."""
         th = np.asarray(theta_rad, dtype=float)
-        h = 1e-3
+        # Over ±3 coarse steps: the median's steps do not turn into noise of the slope.
+        h = 3.0 * float(np.median(np.diff(self.theta_rad))) if self.theta_rad.size > 1 else 1e-3
         dr = (self.at(th + h) - self.at(th - h)) / (2 * h)
         return th - np.arctan2(dr, self.at(th))
 
@@ -175,6 +177,9 @@ def follow_profile(theta_rad, candidates_mm, *, periodic: bool,
         r = np.interp(th, th[ok], smooth[ok], period=2 * np.pi)
     else:
         r = np.interp(th, th[ok], smooth[ok])
+    # A ±1 step moving average takes the staircase out of the median.
+    k = np.arange(th.size)[:, None] + np.arange(-1, 2)[None, :]
+    r = r[k % th.size].mean(axis=1) if periodic else r[np.clip(k, 0, th.size - 1)].mean(axis=1)
     return Profile(theta_rad=th, r_mm=r, measured=measured, periodic=periodic)
 
 
