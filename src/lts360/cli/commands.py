@@ -146,6 +146,8 @@ def cmd_measure(args) -> int:
         if not radius > 0 or not band_mm > 0 or band_mm >= radius:
             raise UsageError(f"--radius-mm/--band-mm: need 0 < band < radius, got "
                              f"{radius}, {band_mm}")
+    if args.continuity_k is not None and not 0 < args.continuity_k <= 100:
+        raise UsageError(f"--continuity-k: must be in (0, 100], got {args.continuity_k}")
     if not 0 < args.theta_step_deg <= 10:
         raise UsageError(f"--theta-step-deg: must be in (0, 10], got {args.theta_step_deg}")
     if not 0 < args.r_step_mm <= 0.1:
@@ -165,13 +167,14 @@ def cmd_measure(args) -> int:
         cloud, grid, log = measure_sections_following(
             sections, cal, theta_step_deg=args.theta_step_deg, r_step_mm=args.r_step_mm,
             half_width_mm=args.band_mm, peak=args.peak, compensate=args.compensate,
-            backend=args.backend, progress=progress)
+            backend=args.backend, progress=progress, continuity_k=args.continuity_k)
         searched = log.describe()
     else:
         grid = CylGrid.from_ranges((radius - band_mm, radius + band_mm),
                                    theta_step_deg=args.theta_step_deg, r_step_mm=args.r_step_mm)
         cloud = measure_sections(sections, cal, grid, peak=args.peak, compensate=args.compensate,
-                                 backend=args.backend, method=args.method, progress=progress)
+                                 backend=args.backend, method=args.method, progress=progress,
+                                 continuity_k=args.continuity_k)
     dt = time.perf_counter() - t0
     coverages = section_coverage(cloud, grid, n_sections=len(sections),
                                  windows_in_cloud=args.method == "inverse")
@@ -256,6 +259,11 @@ def cmd_score(args) -> int:
     print(f"  rms {fmt(metrics['rms_mm'])}, mean {fmt(metrics['mean_mm'])}, "
           f"max |e| {fmt(metrics['max_abs_mm'])}, p95 {fmt(metrics['p95_mm'])}; normal distance "
           f"to the mesh: rms {fmt(metrics['mesh_distance']['rms_mm'])}")
+    if metrics.get("rejected"):
+        print("  rejected without the truth: " + ", ".join(
+            f"{n} {k}" for k, n in metrics["rejected"].items()) + (
+            f"; {metrics.get('n_spurious', 0)} spurious still valid (truth-aware)"
+            if "n_spurious" in metrics else ""))
     if metrics.get("n_spurious"):
         print(f"  {metrics['n_spurious']} spurious points where the true surface is hidden or "
               f"unlit (rms {fmt(metrics['spurious']['rms_mm'])}): counted as missing coverage")

@@ -98,6 +98,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="apply the calibration's residual compensation (paper §4.4)")
     s.add_argument("--backend", choices=("auto", "numpy", "llvm", "cuda"), default="auto",
                    help="auto: the Dr.Jit kernel for the centroid, numpy otherwise")
+    s.add_argument("--continuity-k", type=float, default=None, metavar="K",
+                   help="flag points off their view's local r(θ) (running median ±2°) by more "
+                        "than K robust σ (at least 15 µm) as DISCONTINUOUS (default: off)")
     s.add_argument("--min-coverage", type=float, default=0.5,
                    help="refuse (exit 3) a section that measures less than this share of the "
                         "θ coverage its views predict (default 0.5); a section with no valid "

@@ -124,3 +124,16 @@ def test_a_fixed_band_that_cuts_the_line_flags_it_truncated(paper, cal):
         assert inside.sum() > 50, name
         assert np.mean(v.quality[inside] == Quality.TRUNCATED) > 0.95, name
         assert not np.any(v.valid & (v.quality == Quality.TRUNCATED))
+
+
+def test_continuity_flags_a_point_off_its_view_profile():
+    from lts360.recon.triangulation.reject import continuity_outliers
+
+    rng = np.random.default_rng(1)
+    th = np.radians(np.arange(-180.0, 180.0, 0.1))
+    r = _circle_r(th, (1.0, 0.5), 10.0) + rng.normal(0, 0.003, th.size)
+    r[1000:1900] = np.nan                                   # the view sees part of the turn
+    r[[200, 201, 2500]] += (0.2, -0.15, 0.3)                # a flank's stripe: 150–300 µm off
+    out = continuity_outliers(r, half_window=20)
+    assert np.flatnonzero(out).tolist() == [200, 201, 2500]
+    assert not continuity_outliers(np.full(th.size, np.nan), half_window=20).any()

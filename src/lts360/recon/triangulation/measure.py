@@ -102,14 +102,25 @@ def classic_to_cloud(res: dict, *, z_mm: float, section: int) -> Cloud:
 
 
 def make_runner(cal: Calibration, *, peak: str = "centroid", backend: str = "auto",
-                compensate: bool = False):
+                compensate: bool = False, continuity_k: float | None = None):
     """A function ``plan -> (image -> InverseResult)`` on the chosen backend.
 
     ``backend``: ``numpy`` (the reference), ``llvm`` or ``cuda`` (the Dr.Jit kernel of the
     centroid detector, :class:`lts360.recon.triangulation.fast.FastInverse`), or ``auto`` (Dr.Jit LLVM for
     the centroid when available, numpy otherwise).  The plan is built without samplers
-    (``precompute=False``); the numpy path adds them.
+    (``precompute=False``); the numpy path adds them.  ``continuity_k``: flag points off
+    their view's local r(θ) by more than k·σ
+    (:func:`lts360.recon.triangulation.reject.reject_discontinuous`; ``None``: off).
     """
+    if continuity_k is not None:
+        from lts360.recon.triangulation.reject import reject_discontinuous
+
+        if not continuity_k > 0:
+            raise ValueError(f"continuity_k must be > 0, got {continuity_k}")
+        inner = make_runner(cal, peak=peak, backend=backend, compensate=compensate)
+        return lambda plan: (lambda m: (lambda img: reject_discontinuous(m(img),
+                                                                         k=continuity_k)))(
+            inner(plan))
     if backend not in ("auto", "numpy", "llvm", "cuda"):
         raise ValueError(f"backend must be auto, numpy, llvm or cuda, got {backend!r}")
     use_fast = peak == "centroid" and backend != "numpy"
@@ -143,7 +154,8 @@ def make_runner(cal: Calibration, *, peak: str = "centroid", backend: str = "aut
 
 def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *,
                      peak: str = "centroid", compensate: bool = False, backend: str = "auto",
-                     method: str = "inverse", progress=None) -> Cloud:
+                     method: str = "inverse", progress=None,
+                     continuity_k: float | None = None) -> Cloud:
     """Inverse triangulation of every section with one plan (a band given by the user).
 
     ``backend``: see :func:`make_runner`.
@@ -159,7 +171,8 @@ def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *
             for k, s in (progress(items) if progress else items)])
     if method != "inverse":
         raise ValueError(f"method must be 'inverse' or 'classic', got {method!r}")
-    measure = make_runner(cal, peak=peak, backend=backend, compensate=compensate)(
+    measure = make_runner(cal, peak=peak, backend=backend, compensate=compensate,
+                          continuity_k=continuity_k)(
         plan_inverse(cal, grid, precompute=False))
     clouds = []
     items = list(enumerate(sections))
@@ -221,7 +234,8 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
                                r_step_mm: float = DEFAULT_R_STEP_MM,
                                half_width_mm: float | None = None, peak: str = "centroid",
                                compensate: bool = False, backend: str = "auto",
-                               progress=None) -> tuple[Cloud, CylGrid, BandLog]:
+                               progress=None, continuity_k: float | None = None
+                               ) -> tuple[Cloud, CylGrid, BandLog]:
     """Inverse triangulation with the radial band found from the image.
 
     The first section runs the coarse pass (:class:`lts360.recon.triangulation.band.BandSearch`) and
@@ -246,7 +260,8 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
     w = DEFAULT_FOLLOW_HALF_WIDTH_MM if half_width_mm is None else float(half_width_mm)
     if not w > 0:
         raise ValueError(f"half_width_mm must be > 0, got {half_width_mm}")
-    runner = make_runner(cal, peak=peak, backend=backend, compensate=compensate)
+    runner = make_runner(cal, peak=peak, backend=backend, compensate=compensate,
+                         continuity_k=continuity_k)
     t0 = time.perf_counter()
     search = BandSearch(cal, make_runner(cal, peak=peak, backend=backend))
     log = BandLog(coarse=search.describe(), half_width_mm=w, plan_s=time.perf_counter() - t0)

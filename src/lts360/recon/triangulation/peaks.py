@@ -78,6 +78,9 @@ class Quality(IntEnum):
     TRUNCATED = 5
     #: A saturated plateau wider than the stated limit (``max_plateau_mm``).
     SATURATED_PLATEAU = 6
+    #: Set by :mod:`lts360.recon.triangulation.reject`: off a robust local fit of the view's
+    #: r(θ) by more than k·σ (truth-free rejection of a spurious point).
+    DISCONTINUOUS = 7
 
 
 @dataclass(frozen=True, eq=False)
