@@ -128,32 +128,57 @@ def cmd_measure(args) -> int:
     from lts360.recon.triangulation.acceptance import refusal, section_coverage
     from lts360.recon.triangulation.cloud import write_cloud
     from lts360.recon.triangulation.grid import CylGrid
-    from lts360.recon.triangulation.measure import collect_sections, measure_sections
+    from lts360.recon.triangulation.measure import (collect_sections, measure_sections,
+                                                    measure_sections_following)
 
     if not 0.0 <= args.min_coverage <= 1.0:
         raise UsageError(f"--min-coverage: must be in [0, 1], got {args.min_coverage}")
-    if not args.radius_mm > 0 or not args.band_mm > 0 or args.band_mm >= args.radius_mm:
-        raise UsageError(f"--radius-mm/--band-mm: need 0 < band < radius, got "
-                         f"{args.radius_mm}, {args.band_mm}")
+    # No --radius-mm: the band is found from the image (inverse method); the classic baseline
+    # keeps the fixed default band.
+    follow = args.radius_mm is None and args.method == "inverse"
+    if follow:
+        if args.band_mm is not None and not 0 < args.band_mm <= 10:
+            raise UsageError(f"--band-mm: must be in (0, 10] about the found profile, got "
+                             f"{args.band_mm}")
+    else:
+        radius = 10.0 if args.radius_mm is None else args.radius_mm
+        band_mm = 2.0 if args.band_mm is None else args.band_mm
+        if not radius > 0 or not band_mm > 0 or band_mm >= radius:
+            raise UsageError(f"--radius-mm/--band-mm: need 0 < band < radius, got "
+                             f"{radius}, {band_mm}")
+    if args.continuity_k is not None and not 0 < args.continuity_k <= 100:
+        raise UsageError(f"--continuity-k: must be in (0, 100], got {args.continuity_k}")
+    if not 0 < args.theta_step_deg <= 10:
+        raise UsageError(f"--theta-step-deg: must be in (0, 10], got {args.theta_step_deg}")
+    if not 0 < args.r_step_mm <= 0.1:
+        raise UsageError(f"--r-step-mm: must be in (0, 0.1], got {args.r_step_mm}")
     cal = load_calibration(args.calibration)
     if args.compensate and not any(np.any(v) for v in cal.view_offsets_mm.values()):
         raise UsageError(f"--compensate: {args.calibration} has no view offsets (paper §4.4); "
                          f"make them with `lts360 compensate`")
-    grid = CylGrid.from_ranges((args.radius_mm - args.band_mm, args.radius_mm + args.band_mm),
-                               theta_step_deg=args.theta_step_deg, r_step_mm=args.r_step_mm)
     sections = collect_sections(args.inputs, pitch_mm=args.pitch_mm)
     out = Path(args.out)
     if not out.parent.exists():
         raise UsageError(f"--out: directory {str(out.parent)!r} does not exist")
+    progress = (lambda it: _progress(it, "sections")) if len(sections) > 1 else None
     t0 = time.perf_counter()
-    cloud = measure_sections(sections, cal, grid, peak=args.peak, compensate=args.compensate,
-                             backend=args.backend, method=args.method,
-                             progress=(lambda it: _progress(it, "sections")) if len(sections) > 1
-                             else None)
+    searched = None
+    if follow:
+        cloud, grid, log = measure_sections_following(
+            sections, cal, theta_step_deg=args.theta_step_deg, r_step_mm=args.r_step_mm,
+            half_width_mm=args.band_mm, peak=args.peak, compensate=args.compensate,
+            backend=args.backend, progress=progress, continuity_k=args.continuity_k)
+        searched = log.describe()
+    else:
+        grid = CylGrid.from_ranges((radius - band_mm, radius + band_mm),
+                                   theta_step_deg=args.theta_step_deg, r_step_mm=args.r_step_mm)
+        cloud = measure_sections(sections, cal, grid, peak=args.peak, compensate=args.compensate,
+                                 backend=args.backend, method=args.method, progress=progress,
+                                 continuity_k=args.continuity_k)
     dt = time.perf_counter() - t0
     coverages = section_coverage(cloud, grid, n_sections=len(sections),
                                  windows_in_cloud=args.method == "inverse")
-    refused = refusal(coverages, grid, min_fraction=args.min_coverage)
+    refused = refusal(coverages, grid, min_fraction=args.min_coverage, searched_band=searched)
     valid = cloud.valid
     if not valid.any():  # nothing to write: an empty cloud is no measurement
         print(f"lts360: measure: {refused}; nothing written", file=sys.stderr)
@@ -162,10 +187,27 @@ def cmd_measure(args) -> int:
     what = f"peak {args.peak}" if args.method == "inverse" else "classic (Steger 2-D)"
     print(f"{len(sections)} section(s), grid {grid.n_theta} θ × {grid.n_r} r, {what}: "
           f"{int(valid.sum())} valid points of {len(cloud)} θ samples in {dt:.2f} s -> {out}")
+    if follow:
+        print(f"  {searched}: {len(log.searched)} coarse pass(es) ({log.coarse_s:.2f} s), "
+              f"band planning {log.plan_s:.2f} s, fine measurement {log.fine_s:.2f} s")
+    flagged = _flag_counts(cloud)
+    if flagged:
+        print("  not measured: " + ", ".join(f"{n} {name}" for name, n in flagged))
     if refused is not None:
         print(f"lts360: measure: {refused}; the cloud is written with its flags", file=sys.stderr)
         return 3
     return 0
+
+
+def _flag_counts(cloud) -> list[tuple[str, int]]:
+    """(name, count) of the quality flags of the cloud's invalid rows, largest first."""
+    from lts360.recon.triangulation.peaks import Quality
+
+    q = np.asarray(cloud.quality)[~cloud.valid]
+    codes, counts = np.unique(q, return_counts=True)
+    names = {int(v): v.name for v in Quality}
+    rows = [(names.get(int(c), f"code {int(c)}"), int(n)) for c, n in zip(codes, counts)]
+    return sorted(rows, key=lambda t: -t[1])
 
 
 def cmd_compensate(args) -> int:
@@ -217,6 +259,11 @@ def cmd_score(args) -> int:
     print(f"  rms {fmt(metrics['rms_mm'])}, mean {fmt(metrics['mean_mm'])}, "
           f"max |e| {fmt(metrics['max_abs_mm'])}, p95 {fmt(metrics['p95_mm'])}; normal distance "
           f"to the mesh: rms {fmt(metrics['mesh_distance']['rms_mm'])}")
+    if metrics.get("rejected"):
+        print("  rejected without the truth: " + ", ".join(
+            f"{n} {k}" for k, n in metrics["rejected"].items()) + (
+            f"; {metrics.get('n_spurious', 0)} spurious still valid (truth-aware)"
+            if "n_spurious" in metrics else ""))
     if metrics.get("n_spurious"):
         print(f"  {metrics['n_spurious']} spurious points where the true surface is hidden or "
               f"unlit (rms {fmt(metrics['spurious']['rms_mm'])}): counted as missing coverage")

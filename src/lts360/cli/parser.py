@@ -86,13 +86,21 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--peak", choices=("centroid", "gauss", "steger"), default="centroid")
     s.add_argument("--theta-step-deg", type=float, default=0.1)
     s.add_argument("--r-step-mm", type=float, default=0.005)
-    s.add_argument("--radius-mm", type=float, default=10.0, help="nominal radius (default 10)")
-    s.add_argument("--band-mm", type=float, default=2.0, help="radial search band ± (default 2)")
+    s.add_argument("--radius-mm", type=float, default=None,
+                   help="nominal radius: search the fixed band radius ± --band-mm about the axis "
+                        "(default: find the band from the image, over every radius the rig can "
+                        "image; the classic method then uses 10)")
+    s.add_argument("--band-mm", type=float, default=None,
+                   help="radial search band ±: about --radius-mm (default 2), or about the "
+                        "profile found from the image (default 1)")
     s.add_argument("--pitch-mm", type=float, default=None, help="stage pitch for bare images")
     s.add_argument("--compensate", action="store_true",
                    help="apply the calibration's residual compensation (paper §4.4)")
     s.add_argument("--backend", choices=("auto", "numpy", "llvm", "cuda"), default="auto",
                    help="auto: the Dr.Jit kernel for the centroid, numpy otherwise")
+    s.add_argument("--continuity-k", type=float, default=None, metavar="K",
+                   help="flag points off their view's local r(θ) (running median ±2°) by more "
+                        "than K robust σ (at least 15 µm) as DISCONTINUOUS (default: off)")
     s.add_argument("--min-coverage", type=float, default=0.5,
                    help="refuse (exit 3) a section that measures less than this share of the "
                         "θ coverage its views predict (default 0.5); a section with no valid "

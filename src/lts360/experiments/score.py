@@ -20,6 +20,7 @@ import numpy as np
 
 from lts360.geometry.fit import fit_circle
 from lts360.recon.triangulation.cloud import VIEW_NAMES, Cloud
+from lts360.recon.triangulation.peaks import Quality
 from lts360.scenes.objects import SceneObject, build_object
 
 __all__ = ["load_truth", "load_rig_truth", "signed_mesh_distance", "score_cloud", "error_stats",
@@ -178,6 +179,12 @@ def score_cloud(cloud: Cloud, obj: SceneObject, *, theta_bin_deg: float = 0.5,
     statistics of every valid point.
     """
     valid = cloud.valid
+    # Rows rejected by a truth-free criterion of the measurement (quality flags), beside the
+    # truth-aware "spurious" count below.
+    rejected = {"continuity": int(np.sum(np.asarray(cloud.quality) == Quality.DISCONTINUOUS)),
+                "truncated": int(np.sum(np.asarray(cloud.quality) == Quality.TRUNCATED)),
+                "saturated_plateau": int(np.sum(np.asarray(cloud.quality)
+                                                == Quality.SATURATED_PLATEAU))}
     c = cloud.select(valid)
     pts = c.points_mm
     analytic = obj.radial_error(pts) if obj.radius_fn is not None else np.full(len(pts), np.nan)
@@ -193,7 +200,8 @@ def score_cloud(cloud: Cloud, obj: SceneObject, *, theta_bin_deg: float = 0.5,
         analytic, mesh_err, primary = analytic[keep], mesh_err[keep], primary[keep]
     out = {"object": obj.spec, "n_points": int(len(pts)), "n_theta_samples": int(len(cloud)),
            "truth": "analytic r(θ, z)" if np.isfinite(analytic).any() else "mesh distance",
-           "coverage_deg": _coverage_deg(c.theta_rad, c.section, theta_bin_deg), **extra}
+           "coverage_deg": _coverage_deg(c.theta_rad, c.section, theta_bin_deg),
+           "rejected": rejected, **extra}
     out.update(error_stats(primary))
     out["mesh_distance"] = error_stats(mesh_err)
     out["analytic"] = error_stats(analytic)

@@ -98,13 +98,21 @@ def test_an_image_without_a_stripe_exits_3_naming_views_and_radii(true_calibrati
     cal, shape = true_calibration
     _write_png(tmp_path / "dark.png", np.zeros(shape, np.uint8))
     out = tmp_path / "cloud.ply"
-    code = main(["measure", str(tmp_path / "dark.png"), "--pitch-mm", "1", "--calibration",
-                 str(cal), "--out", str(out), "--theta-step-deg", "0.5"])
+    args = ["measure", str(tmp_path / "dark.png"), "--pitch-mm", "1", "--calibration",
+            str(cal), "--out", str(out), "--theta-step-deg", "0.5"]
+    # A fixed band.
+    code = main(args + ["--radius-mm", "10"])
     err = capsys.readouterr().err.strip()
     assert code == 3 and not out.exists()
     assert len(err.splitlines()) == 1
     assert "no valid point" in err and "views direct, left, right" in err
     assert "r = 8.000–12.000 mm" in err and "nothing written" in err
+    # The band searched from the image: every radius the rig can image.
+    code = main(args)
+    err = capsys.readouterr().err.strip()
+    assert code == 3 and not out.exists() and len(err.splitlines()) == 1
+    assert "no valid point" in err and "views direct, left, right" in err
+    assert "r = 0.10–40.31 mm searched" in err and "no stripe was found" in err
 
 
 def test_a_stripe_in_one_view_only_is_refused_for_its_coverage(true_calibration, tmp_path,
@@ -132,4 +140,20 @@ def test_min_coverage_outside_0_1_is_a_usage_error(true_calibration, tmp_path, c
     assert main(["measure", str(tmp_path), "--calibration", str(cal), "--out",
                  str(tmp_path / "c.ply"), "--min-coverage", "1.5"]) == 2
     assert "--min-coverage" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("extra,name", [(["--band-mm", "-1"], "--band-mm"),
+                                        (["--band-mm", "11"], "--band-mm"),
+                                        (["--radius-mm", "1", "--band-mm", "2"], "--radius-mm"),
+                                        (["--r-step-mm", "0"], "--r-step-mm"),
+                                        (["--theta-step-deg", "20"], "--theta-step-deg"),
+                                        (["--radius-mm", "ten"], "--radius-mm"),
+                                        (["--band-search"], "unrecognized")])
+def test_bad_band_values_are_one_line_usage_errors(true_calibration, tmp_path, capsys, extra,
+                                                   name):
+    cal, _ = true_calibration
+    code = main(["measure", str(tmp_path), "--calibration", str(cal), "--out",
+                 str(tmp_path / "c.ply")] + extra)
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and name in err and len(err.splitlines()) == 1, err
 

@@ -58,8 +58,9 @@ def test_fast_path_matches_the_numpy_reference(case, fast):
 
 
 def test_fast_path_flags_match_on_several_peaks_and_saturation(case, fast):
-    """A second, weaker stripe (SEVERAL_PEAKS), an over-exposed copy (SATURATED) and a float
-    image with NaN pixels and a threshold the kernel has not seen (it is not a literal)."""
+    """A second, weaker stripe (SEVERAL_PEAKS), an over-exposed copy (SATURATED), a strongly
+    over-exposed one (SATURATED_PLATEAU) and a float image with NaN pixels and a threshold the
+    kernel has not seen (it is not a literal): runs that border a NaN sample are TRUNCATED."""
     from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.recon.triangulation.peaks import Quality
 
@@ -69,11 +70,13 @@ def test_fast_path_flags_match_on_several_peaks_and_saturation(case, fast):
     bright = np.clip(3.0 * img, 0, 255).astype(np.uint8)
     holes = img.copy()
     holes[::7, ::5] = np.nan
-    for test_image, kwargs, flag in [(double, {}, Quality.SEVERAL_PEAKS),
-                                     (bright, {}, Quality.SATURATED),
-                                     (holes, {"threshold": 17.25}, None)]:
+    blinding = np.clip(20.0 * img, 0, 255).astype(np.uint8)
+    for test_image, kwargs, flag, n in [(double, {}, Quality.SEVERAL_PEAKS, 50),
+                                        (bright, {}, Quality.SATURATED, 50),
+                                        (blinding, {}, Quality.SATURATED_PLATEAU, 0),
+                                        (holes, {"threshold": 17.25}, Quality.TRUNCATED, 10)]:
         ref = inverse_triangulate(test_image, cal, grid, plan=plan, **kwargs)
-        _compare(ref, fast(test_image, **kwargs), min_found=50)
+        _compare(ref, fast(test_image, **kwargs), min_found=n)
         if flag is not None:
             assert sum(int(np.sum(v.quality == flag)) for v in ref.views.values()) > 20
 
@@ -117,7 +120,8 @@ def test_fast_path_rejects_a_wrong_image_size(fast):
 
 def test_profile_walk_matches_main_run_and_centroid():
     """The one-pass run logic of the kernel against :func:`lts360.recon.triangulation.peaks.centroid` on
-    random profiles: several runs, equal maxima, runs touching either end, NaN, saturation."""
+    random profiles: several runs, equal maxima, runs touching either end or NaN (truncated),
+    saturation and saturated plateaus wider than 2 samples."""
     import drjit.llvm as mod
 
     from lts360.recon.triangulation.fast import _walk_profiles
@@ -137,9 +141,9 @@ def test_profile_walk_matches_main_run_and_centroid():
     flat = mod.Float(prof.ravel())
     base = dr.arange(mod.UInt32, n) * nr
     centre, q, peak = _walk_profiles(dr, mod, lambda j: dr.gather(mod.Float, flat, base + j),
-                                     n, nr, threshold, saturation, 0.5)
+                                     n, nr, threshold, saturation, 0.5, 2)
     ref = centroid(prof.astype(float), np.arange(nr, dtype=float), threshold=threshold,
-                   saturation=saturation)
+                   saturation=saturation, max_plateau_mm=2.0)
     assert np.array_equal(np.asarray(q, dtype=np.uint8), ref.quality)
     got = np.asarray(centre, dtype=float)
     found = np.isfinite(ref.r_mm)
@@ -148,4 +152,4 @@ def test_profile_walk_matches_main_run_and_centroid():
     pk = np.asarray(peak, dtype=float)
     assert np.array_equal(np.isfinite(pk), np.isfinite(ref.intensity))
     assert np.allclose(pk[np.isfinite(pk)], ref.intensity[np.isfinite(pk)])
-    assert {int(v) for v in np.unique(ref.quality)} == {0, 1, 2, 3}
+    assert {int(v) for v in np.unique(ref.quality)} == {0, 1, 2, 3, 5, 6}

@@ -121,3 +121,43 @@ def test_bad_arguments():
         gauss(prof, np.r_[R_MM[:-1], R_MM[-1] + 1.0], threshold=THR)
     with pytest.raises(ValueError, match="peak must be"):
         detect_peaks("parabola", prof, R_MM, threshold=THR)
+
+
+def test_a_line_cut_by_the_band_or_a_nan_sample_is_truncated():
+    """A line at the band's inner or outer end, or against NaN samples (outside the image or
+    beyond the view's mirror), is TRUNCATED in every detector, and never FOUND; a line clear of
+    both is not, even with NaN samples beyond a gap below the threshold."""
+    inner = _profiles([R_MM[0] + 0.05], [0.1])[0]         # the run starts at sample 0
+    outer = _profiles([R_MM[-1] - 0.02], [0.1])[0]        # ... ends at the last sample
+    cut = np.where(R_MM > 10.05, np.nan, _profiles([10.0], [0.1])[0])   # NaN inside the run
+    clear = np.where(R_MM > 10.6, np.nan, _profiles([10.0], [0.1])[0])  # NaN beyond a gap
+    prof = np.stack([inner, outer, cut, clear])
+    for method in ("centroid", "gauss", "steger"):
+        res = detect_peaks(method, prof, R_MM, threshold=THR)
+        assert [Quality(q) for q in res.quality] == [Quality.TRUNCATED] * 3 + [Quality.FOUND], \
+            method
+
+
+def test_a_wide_saturated_plateau_has_its_own_flag():
+    """Clipped at full scale: a narrow top stays SATURATED (still located), a plateau wider than
+    ``max_plateau_mm`` is SATURATED_PLATEAU; ``None`` lifts the limit."""
+    line = _profiles([10.0], [0.1], amp=1.0)[0]
+    narrow = np.minimum(300.0 * line, 255.0)               # top above 255 over ~0.06 mm
+    wide = np.minimum(3000.0 * line, 255.0)                # ... over ~0.48 mm
+    prof = np.stack([narrow, wide])
+    width = lambda p: (p >= 255.0).sum() * STEP_MM  # noqa: E731
+    assert width(narrow) < 0.15 < width(wide)
+    for method in ("centroid", "gauss", "steger"):
+        res = detect_peaks(method, prof, R_MM, threshold=THR, saturation=255.0)
+        assert [Quality(q) for q in res.quality] == [Quality.SATURATED,
+                                                     Quality.SATURATED_PLATEAU], method
+    res = centroid(prof, R_MM, threshold=THR, saturation=255.0, max_plateau_mm=None)
+    assert (res.quality == Quality.SATURATED).all()
+    assert abs(res.r_mm[1] - 10.0) < 1e-3  # symmetric: the clipped centre is still right
+
+
+def test_quality_codes_are_stable():
+    """Codes are stored as uint8 in the PLY: new ones are appended, never renumbered."""
+    assert [(q.name, int(q)) for q in Quality] == [
+        ("FOUND", 0), ("NO_PEAK", 1), ("SATURATED", 2), ("SEVERAL_PEAKS", 3),
+        ("OUTSIDE_WINDOW", 4), ("TRUNCATED", 5), ("SATURATED_PLATEAU", 6), ("DISCONTINUOUS", 7)]

@@ -95,16 +95,21 @@ def section_coverage(cloud: Cloud, grid: CylGrid, *, n_sections: int,
 
 
 def refusal(coverages: list[SectionCoverage], grid: CylGrid, *,
-            min_fraction: float = DEFAULT_MIN_COVERAGE, views: tuple[str, ...] = ()) -> str | None:
+            min_fraction: float = DEFAULT_MIN_COVERAGE, views: tuple[str, ...] = (),
+            searched_band: str | None = None) -> str | None:
     """One line saying why the measurement is refused, or ``None`` when every section passes.
 
     A section fails with no valid point, or with less than ``min_fraction`` of its predicted
     coverage.  ``views``: the views the plan searched (named when a section has no rows).
+    ``searched_band``: the radii searched, in words, when the band was found from the image
+    (:meth:`lts360.recon.triangulation.measure.BandLog.describe`); default: the grid's radii.
+    TRUNCATED and SATURATED_PLATEAU rows count as searched, not measured.
     """
     if not 0.0 <= min_fraction <= 1.0:
         raise ValueError(f"min_fraction must be in [0, 1], got {min_fraction}")
-    r0, r1 = float(grid.r_mm[0]), float(grid.r_mm[-1])
-    band = f"r = {r0:.3f}–{r1:.3f} mm"
+    r0, r1 = grid.r_range_mm
+    found = searched_band is not None
+    band = searched_band if found else f"r = {r0:.3f}–{r1:.3f} mm"
     searched = sorted({v for c in coverages for v in c.views} | set(views))
     names = ", ".join(searched) if searched else "none (no view window on this grid)"
     empty = [c for c in coverages if c.n_valid == 0]
@@ -113,16 +118,23 @@ def refusal(coverages: list[SectionCoverage], grid: CylGrid, *,
                  else "the section")
         pred = [c.predicted_deg for c in empty if c.predicted_deg is not None]
         windows = f" (their θ windows cover {max(pred):.1f}°)" if pred else ""
-        return (f"no valid point in {which}: views {names} searched over {band}{windows}; "
-                f"the object or its stripe lies outside that band (or the image has no laser "
-                f"line): give --radius-mm near the object's radius and a --band-mm that holds it")
+        hint = ("no stripe was found at any radius the rig can image (no laser line, too dark "
+                "for the threshold, or the object outside the field): check the image, or give "
+                "--radius-mm and --band-mm" if found else
+                "the object or its stripe lies outside that band (or the image has no laser "
+                "line): give --radius-mm near the object's radius and a --band-mm that holds it, "
+                "or leave --radius-mm out to find the band from the image")
+        return f"no valid point in {which}: views {names} searched over {band}{windows}; {hint}"
     low = [c for c in coverages if c.fraction is not None and c.fraction < min_fraction]
     if low:
         worst = min(low, key=lambda c: c.fraction)
         return (f"{len(low)} of {len(coverages)} section(s) measured less than "
                 f"{min_fraction:.0%} of the coverage their views predict (worst: section "
                 f"{worst.section}, {worst.measured_deg:.1f}° of {worst.predicted_deg:.1f}°, "
-                f"views {', '.join(worst.views) or 'none'}) over {band}; the object may be off "
-                f"the axis or outside the band: widen --band-mm or set --radius-mm "
-                f"(--min-coverage sets the share)")
+                f"views {', '.join(worst.views) or 'none'}) over {band}; "
+                + ("the profile may leave the band (a wider --band-mm), or parts of the section "
+                   "are hidden or unlit" if found else
+                   "the object may be off the axis or outside the band: widen --band-mm, set "
+                   "--radius-mm, or leave --radius-mm out to find the band from the image")
+                + " (--min-coverage sets the share)")
     return None

@@ -45,7 +45,8 @@ import numpy as np
 from lts360.recon.triangulation.interp import prefilter
 from lts360.recon.triangulation.inverse import (DEFAULT_ACCEPT, InversePlan, InverseResult, assemble_view,
                                   default_saturation, default_threshold)
-from lts360.recon.triangulation.peaks import DEFAULT_SECOND_PEAK_FRACTION, PeakResult, Quality
+from lts360.recon.triangulation.peaks import (DEFAULT_MAX_PLATEAU_MM, DEFAULT_SECOND_PEAK_FRACTION,
+                                              PeakResult, Quality, plateau_samples)
 
 __all__ = ["FastInverse", "window_layout"]
 
@@ -144,70 +145,88 @@ def window_layout(uv: np.ndarray, image_shape, *, boundary: str = "edge"
 
 
 def _walk_profiles(dr, mod, sample, n: int, nr: int, threshold: float,
-                   saturation: float | None, fraction: float):
+                   saturation: float | None, fraction: float, max_plateau: int | None = None):
     """The main run and thresholded centroid of ``n`` profiles in one pass each (Dr.Jit).
 
     ``sample(j)`` returns the ``j``-th sample of every profile (a Float of size ``n``; NaN
     counts as below the threshold, as in :func:`lts360.recon.triangulation.peaks.main_run`).  The loop keeps,
     per profile, the current run above the threshold and the strongest run so far (start,
-    maximum, Σw, Σw·(j − start), w = value − threshold), the largest maximum of the other runs
-    and the profile's maximum.  A run replaces the strongest one only if its maximum is strictly
-    larger: ties go to the first maximum, as ``argmax`` in the reference.
+    maximum, Σw, Σw·(j − start), w = value − threshold; whether it starts at the band's first
+    sample or after a NaN one, and its count of saturated samples), the largest maximum of the
+    other runs and the profile's maximum.  A run replaces the strongest one only if its maximum
+    is strictly larger: ties go to the first maximum, as ``argmax`` in the reference.  A run
+    that ends on a NaN sample or at the last sample is truncated.
 
     Returns
     -------
     centre : Float
         Centroid of the main run in samples (NaN where there is none).
     quality : UInt32
-        :class:`Quality` (``FOUND``, ``NO_PEAK``, ``SATURATED``, ``SEVERAL_PEAKS``).
+        :class:`Quality` (``FOUND``, ``NO_PEAK``, ``SATURATED``, ``SEVERAL_PEAKS``,
+        ``TRUNCATED``, ``SATURATED_PLATEAU``).
     peak : Float
         Largest sample (−inf for an all-NaN profile).
     """
     Float, UInt32, Bool = mod.Float, mod.UInt32, mod.Bool
     thr = dr.opaque(Float, threshold)
+    sat = dr.opaque(Float, float("inf") if saturation is None else saturation)
 
-    def close(ending, cur, best, other):
-        """Fold the current run into (best, other) where ``ending``."""
-        c_start, c_max, c_sw, c_swj = cur
-        b_start, b_max, b_sw, b_swj = best
+    def close(ending, right_cut, cur, best, other):
+        """Fold the current run into (best, other) where ``ending``; ``right_cut``: the run
+        ends on a NaN sample or at the band's end."""
+        c_start, c_max, c_sw, c_swj, c_cut, c_nsat = cur
+        b_start, b_max, b_sw, b_swj, b_cut, b_nsat = best
         better = ending & (c_max > b_max)
         other = dr.select(better, dr.maximum(other, b_max),
                           dr.select(ending, dr.maximum(other, c_max), other))
         best = (dr.select(better, c_start, b_start), dr.select(better, c_max, b_max),
-                dr.select(better, c_sw, b_sw), dr.select(better, c_swj, b_swj))
+                dr.select(better, c_sw, b_sw), dr.select(better, c_swj, b_swj),
+                dr.select(better, c_cut | right_cut, b_cut), dr.select(better, c_nsat, b_nsat))
         return best, other
 
-    def body(j, peak, in_run, c_start, c_max, c_sw, c_swj, b_start, b_max, b_sw, b_swj, other):
+    def body(j, peak, in_run, prev_nan, c_start, c_max, c_sw, c_swj, c_cut, c_nsat,
+             b_start, b_max, b_sw, b_swj, b_cut, b_nsat, other):
         v = sample(j)
-        v = dr.select(dr.isnan(v), -dr.inf, v)  # NaN (outside the image) is never above
+        is_nan = dr.isnan(v)
+        v = dr.select(is_nan, -dr.inf, v)  # NaN (outside the image) is never above
         peak = dr.maximum(peak, v)
         above = v > thr
         wgt = v - thr
-        (b_start, b_max, b_sw, b_swj), other = close(
-            in_run & ~above, (c_start, c_max, c_sw, c_swj), (b_start, b_max, b_sw, b_swj), other)
+        best, other = close(in_run & ~above, is_nan, (c_start, c_max, c_sw, c_swj, c_cut, c_nsat),
+                            (b_start, b_max, b_sw, b_swj, b_cut, b_nsat), other)
+        b_start, b_max, b_sw, b_swj, b_cut, b_nsat = best
         new = above & ~in_run
         grow = above & in_run
+        one_sat = dr.select(v >= sat, UInt32(1), UInt32(0))
         c_start = dr.select(new, j, c_start)
         c_max = dr.select(new, v, dr.select(grow, dr.maximum(c_max, v), c_max))
         c_sw = dr.select(new, wgt, dr.select(grow, c_sw + wgt, c_sw))
         c_swj = dr.select(new, 0.0, dr.select(grow, c_swj + wgt * Float(j - c_start), c_swj))
-        return j + 1, peak, above, c_start, c_max, c_sw, c_swj, b_start, b_max, b_sw, b_swj, other
+        c_cut = dr.select(new, prev_nan | (j == 0), c_cut)
+        c_nsat = dr.select(new, one_sat, dr.select(grow, c_nsat + one_sat, c_nsat))
+        return (j + 1, peak, above, is_nan, c_start, c_max, c_sw, c_swj, c_cut, c_nsat,
+                b_start, b_max, b_sw, b_swj, b_cut, b_nsat, other)
 
-    zu, zf = dr.zeros(UInt32, n), dr.zeros(Float, n)
+    zu, zf, zb = dr.zeros(UInt32, n), dr.zeros(Float, n), dr.zeros(Bool, n)
     ninf = dr.full(Float, -dr.inf, n)
-    state = (zu, ninf, dr.zeros(Bool, n), zu, ninf, zf, zf, zu, ninf, zf, zf, ninf)
-    (_, peak, in_run, c_start, c_max, c_sw, c_swj, b_start, b_max, b_sw, b_swj,
-     other) = dr.while_loop(state, lambda j, *_: j < nr, body, label="lts360_profiles")
-    (b_start, b_max, b_sw, b_swj), other = close(in_run, (c_start, c_max, c_sw, c_swj),
-                                                 (b_start, b_max, b_sw, b_swj), other)
+    state = (zu, ninf, zb, zb, zu, ninf, zf, zf, zb, zu, zu, ninf, zf, zf, zb, zu, ninf)
+    (_, peak, in_run, _, c_start, c_max, c_sw, c_swj, c_cut, c_nsat, b_start, b_max, b_sw, b_swj,
+     b_cut, b_nsat, other) = dr.while_loop(state, lambda j, *_: j < nr, body,
+                                           label="lts360_profiles")
+    (b_start, b_max, b_sw, b_swj, b_cut, b_nsat), other = close(
+        in_run, dr.full(Bool, True, n), (c_start, c_max, c_sw, c_swj, c_cut, c_nsat),
+        (b_start, b_max, b_sw, b_swj, b_cut, b_nsat), other)
     has = peak > thr
     centre = dr.select(has, Float(b_start) + b_swj / b_sw, dr.nan)
     q = dr.select(has, UInt32(int(Quality.FOUND)), UInt32(int(Quality.NO_PEAK)))
     if saturation is not None:
-        q = dr.select(has & (peak >= dr.opaque(Float, saturation)),
-                      UInt32(int(Quality.SATURATED)), q)
+        q = dr.select(has & (peak >= sat), UInt32(int(Quality.SATURATED)), q)
+        if max_plateau is not None:
+            q = dr.select(has & (b_nsat > dr.opaque(UInt32, int(max_plateau))),
+                          UInt32(int(Quality.SATURATED_PLATEAU)), q)
     several = has & (other >= dr.opaque(Float, fraction) * peak)
     q = dr.select(several, UInt32(int(Quality.SEVERAL_PEAKS)), q)
+    q = dr.select(has & b_cut, UInt32(int(Quality.TRUNCATED)), q)
     return centre, q, peak
 
 
@@ -270,7 +289,7 @@ class FastInverse:
         dr.eval(table)
         return table
 
-    def _profile_kernel(self, table, threshold, saturation, fraction):
+    def _profile_kernel(self, table, threshold, saturation, fraction, max_plateau=None):
         """Walk every profile once; return centroid radius, quality and peak per row."""
         dr, mod = self.dr, self.mod
         Float, UInt32 = mod.Float, mod.UInt32
@@ -292,12 +311,14 @@ class FastInverse:
             return acc
 
         centre, q, peak = _walk_profiles(dr, mod, sample, n, self.nr, threshold, saturation,
-                                         fraction)
+                                         fraction, max_plateau)
         return self._r0 + self._step * centre, q, peak
 
     def peaks(self, image, *, threshold: float, saturation: float | None,
-              second_peak_fraction: float = DEFAULT_SECOND_PEAK_FRACTION) -> dict[str, PeakResult]:
-        """Per view: the centroid peak of every windowed θ (numpy arrays on return)."""
+              second_peak_fraction: float = DEFAULT_SECOND_PEAK_FRACTION,
+              max_plateau_mm: float | None = DEFAULT_MAX_PLATEAU_MM) -> dict[str, PeakResult]:
+        """Per view: the centroid peak of every windowed θ (numpy arrays on return), radii on
+        the grid's base radii ``grid.r_mm`` (:func:`assemble_view` adds the per-θ shift)."""
         dr = self.dr
         img = np.asarray(image)
         if img.shape != self.shape:
@@ -308,7 +329,8 @@ class FastInverse:
         table = self._tap_table(img)
         rc, q, peak = self._profile_kernel(table, float(threshold),
                                            None if saturation is None else float(saturation),
-                                           float(second_peak_fraction))
+                                           float(second_peak_fraction),
+                                           plateau_samples(max_plateau_mm, self.plan.grid.r_mm))
         dr.eval(rc, q, peak)
         r_all = np.asarray(rc, dtype=float)
         q_all = np.asarray(q, dtype=np.uint8)
@@ -316,8 +338,8 @@ class FastInverse:
         res = {}
         for name, (a, b) in self._rows.items():
             r, quality, pk = r_all[a:b], q_all[a:b], p_all[a:b]
-            quality = np.where(np.isfinite(r) | (quality == Quality.NO_PEAK), quality,
-                               np.uint8(Quality.NO_PEAK)).astype(np.uint8)
+            keep = np.isfinite(r) | (quality == Quality.NO_PEAK) | (quality == Quality.TRUNCATED)
+            quality = np.where(keep, quality, np.uint8(Quality.NO_PEAK)).astype(np.uint8)
             r = np.where(quality == Quality.NO_PEAK, np.nan, r)
             res[name] = PeakResult(r_mm=r, quality=quality,
                                    intensity=np.where(np.isfinite(pk), pk, np.nan))

@@ -3,6 +3,11 @@
 The grid lies in the laser plane (``z = 0`` of the measurement frame): angles ``θ`` (radians,
 0 along +X, counter-clockwise seen from +Z) times radii ``r`` (millimetres).  Degrees only at
 the interface (:meth:`CylGrid.from_ranges`).
+
+A grid either spans the same radii at every θ (a band about the axis) or follows a profile:
+the radii at ``θ_i`` are ``r_mm + r_shift_mm[i]`` (:meth:`CylGrid.following`), a band of the
+same uniform samples centred on a first-pass profile ``r₀(θ)``.  The peak detectors work on the
+base radii ``r_mm``; the shift of each θ is added when the peaks are assembled.
 """
 
 from __future__ import annotations
@@ -38,10 +43,14 @@ class CylGrid:
         Strictly increasing angles (radians), spanning at most one turn.
     r_mm : (nr,) float
         Strictly increasing, uniformly spaced radii (millimetres), > 0.
+    r_shift_mm : (nθ,) float, optional
+        Radial shift of each θ's samples (mm; zeros by default): the samples of ``θ_i`` lie at
+        ``r_mm + r_shift_mm[i]``, all > 0.
     """
 
     theta_rad: np.ndarray
     r_mm: np.ndarray
+    r_shift_mm: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         th = np.array(self.theta_rad, dtype=float).ravel()
@@ -54,11 +63,53 @@ class CylGrid:
             raise ValueError("r_mm: must be at least 3 strictly increasing finite radii > 0")
         if not _uniform(r):
             raise ValueError("r_mm: must be uniformly spaced (the peak detectors assume it)")
+        shift = (np.zeros(th.size) if self.r_shift_mm is None
+                 else np.array(self.r_shift_mm, dtype=float).ravel())
+        if shift.shape != th.shape or not np.all(np.isfinite(shift)):
+            raise ValueError(f"r_shift_mm: must be {th.size} finite shifts (one per θ), got "
+                             f"shape {shift.shape}")
+        if np.any(r[0] + shift <= 0):
+            raise ValueError("r_shift_mm: every radius r_mm + r_shift_mm must be > 0")
         th.setflags(write=False)
         r.setflags(write=False)
+        shift.setflags(write=False)
         object.__setattr__(self, "theta_rad", th)
         object.__setattr__(self, "r_mm", r)
+        object.__setattr__(self, "r_shift_mm", shift)
 
+    @classmethod
+    def following(cls, theta_rad, r_centre_mm, half_width_mm: float, *,
+                  r_step_mm: float = DEFAULT_R_STEP_MM) -> "CylGrid":
+        """A band ``r₀(θ) ± half_width`` that follows a profile.
+
+        Parameters
+        ----------
+        theta_rad : (nθ,) float
+            Strictly increasing angles.
+        r_centre_mm : (nθ,) float
+            The band's centre ``r₀(θ)`` at each angle, > ``half_width_mm``.
+        half_width_mm : float, >0
+        r_step_mm : float, >0
+        """
+        th = np.asarray(theta_rad, dtype=float).ravel()
+        rc = np.asarray(r_centre_mm, dtype=float).ravel()
+        if rc.shape != th.shape or not np.all(np.isfinite(rc)):
+            raise ValueError(f"r_centre_mm: must be {th.size} finite radii, got shape {rc.shape}")
+        if not half_width_mm > 0 or not r_step_mm > 0:
+            raise ValueError(f"half_width_mm and r_step_mm must be > 0, got {half_width_mm}, "
+                             f"{r_step_mm}")
+        if np.any(rc - half_width_mm <= 0):
+            raise ValueError(f"r_centre_mm: the band r₀ ± {half_width_mm:g} mm must stay > 0, "
+                             f"got r₀ down to {rc.min():g} mm")
+        n_half = int(math.floor(half_width_mm / r_step_mm * (1 + _STEP_SLACK)))
+        mid = float(np.median(rc))
+        offsets = np.arange(-n_half, n_half + 1) * r_step_mm
+        # Base radii about the median centre; the shifts place each θ's band on r₀(θ).
+        base = mid + offsets
+        if base[0] <= 0:
+            base = base - base[0] + r_step_mm
+        shift = rc - (base[0] + n_half * r_step_mm)
+        return cls(theta_rad=th, r_mm=base, r_shift_mm=shift)
     @classmethod
     def from_ranges(cls, r_range_mm: tuple[float, float], *,
                     theta_range_deg: tuple[float, float] = (-180.0, 180.0),
@@ -114,6 +165,22 @@ class CylGrid:
         return self.n_theta, self.n_r
 
     @property
+    def follows_profile(self) -> bool:
+        """Whether the radii differ between θ (a band about a profile, not about the axis)."""
+        return bool(np.any(self.r_shift_mm != 0))
+
+    @property
+    def r_range_mm(self) -> tuple[float, float]:
+        """Smallest and largest radius sampled at any θ."""
+        return (float(self.r_mm[0] + self.r_shift_mm.min()),
+                float(self.r_mm[-1] + self.r_shift_mm.max()))
+
+    def radii_mm(self, theta_index=None) -> np.ndarray:
+        """(nθ or k, nr) radii of each θ's samples: ``r_mm + r_shift_mm[i]``."""
+        sh = self.r_shift_mm if theta_index is None else self.r_shift_mm[theta_index]
+        return sh[:, None] + self.r_mm[None, :]
+
+    @property
     def r_step_mm(self) -> float:
         return float(self.r_mm[1] - self.r_mm[0])
 
@@ -140,11 +207,12 @@ class CylGrid:
         Returns
         -------
         (nθ or k, nr, 3) float
-            ``(r cos θ, r sin θ, 0)`` in millimetres.
+            ``(r cos θ, r sin θ, 0)`` in millimetres, ``r = r_mm + r_shift_mm[i]``.
         """
         th = self.theta_rad if theta_index is None else self.theta_rad[theta_index]
+        r = self.radii_mm(theta_index)
         c, s = np.cos(th)[:, None], np.sin(th)[:, None]
         out = np.zeros((th.size, self.n_r, 3))
-        out[..., 0] = c * self.r_mm
-        out[..., 1] = s * self.r_mm
+        out[..., 0] = c * r
+        out[..., 1] = s * r
         return out

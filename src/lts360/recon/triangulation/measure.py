@@ -8,17 +8,20 @@ Nothing here reads the object or its truth.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from lts360.recon.calibration.model import Calibration
 from lts360.recon.triangulation.cloud import VIEW_CODES, Cloud
-from lts360.recon.triangulation.grid import CylGrid
-from lts360.recon.triangulation.inverse import InverseResult, inverse_triangulate, plan_inverse
+from lts360.recon.triangulation.grid import DEFAULT_R_STEP_MM, DEFAULT_THETA_STEP_DEG, CylGrid
+from lts360.recon.triangulation.inverse import (InversePlan, InverseResult, inverse_triangulate,
+                                                plan_inverse)
+from lts360.recon.triangulation.peaks import Quality
 
-__all__ = ["Section", "collect_sections", "measure_sections", "result_to_cloud", "read_image"]
+__all__ = ["Section", "collect_sections", "measure_sections", "measure_sections_following",
+           "make_runner", "result_to_cloud", "read_image", "BandLog"]
 
 
 @dataclass(frozen=True)
@@ -98,14 +101,64 @@ def classic_to_cloud(res: dict, *, z_mm: float, section: int) -> Cloud:
     return Cloud.concatenate(parts)
 
 
-def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *,
-                     peak: str = "centroid", compensate: bool = False, backend: str = "auto",
-                     method: str = "inverse", progress=None) -> Cloud:
-    """Inverse triangulation of every section with one plan.
+def make_runner(cal: Calibration, *, peak: str = "centroid", backend: str = "auto",
+                compensate: bool = False, continuity_k: float | None = None):
+    """A function ``plan -> (image -> InverseResult)`` on the chosen backend.
 
     ``backend``: ``numpy`` (the reference), ``llvm`` or ``cuda`` (the Dr.Jit kernel of the
     centroid detector, :class:`lts360.recon.triangulation.fast.FastInverse`), or ``auto`` (Dr.Jit LLVM for
-    the centroid when available, numpy otherwise).
+    the centroid when available, numpy otherwise).  The plan is built without samplers
+    (``precompute=False``); the numpy path adds them.  ``continuity_k``: flag points off
+    their view's local r(θ) by more than k·σ
+    (:func:`lts360.recon.triangulation.reject.reject_discontinuous`; ``None``: off).
+    """
+    if continuity_k is not None:
+        from lts360.recon.triangulation.reject import reject_discontinuous
+
+        if not continuity_k > 0:
+            raise ValueError(f"continuity_k must be > 0, got {continuity_k}")
+        inner = make_runner(cal, peak=peak, backend=backend, compensate=compensate)
+        return lambda plan: (lambda m: (lambda img: reject_discontinuous(m(img),
+                                                                         k=continuity_k)))(
+            inner(plan))
+    if backend not in ("auto", "numpy", "llvm", "cuda"):
+        raise ValueError(f"backend must be auto, numpy, llvm or cuda, got {backend!r}")
+    use_fast = peak == "centroid" and backend != "numpy"
+    if backend in ("llvm", "cuda") and peak != "centroid":
+        raise ValueError(f"the Dr.Jit backend implements the centroid detector only, not {peak!r}")
+
+    def numpy_runner(plan: InversePlan):
+        if plan.views and next(iter(plan.views.values())).sampler is None:
+            plan = plan_inverse(plan.cal, plan.grid, windows={n: vp.window for n, vp in
+                                                              plan.views.items()},
+                                views=tuple(plan.views), precompute=True,
+                                interpolation=plan.interpolation)
+        return lambda img: inverse_triangulate(img, cal, plan.grid, peak=peak,
+                                               compensate=compensate, plan=plan)
+
+    def runner(plan: InversePlan):
+        if use_fast:
+            from lts360.recon.triangulation.fast import FastInverse
+
+            try:
+                fast = FastInverse(plan, backend="llvm" if backend == "auto" else backend)
+            except RuntimeError:
+                if backend != "auto":
+                    raise
+            else:
+                return lambda img: fast(img, compensate=compensate)
+        return numpy_runner(plan)
+
+    return runner
+
+
+def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *,
+                     peak: str = "centroid", compensate: bool = False, backend: str = "auto",
+                     method: str = "inverse", progress=None,
+                     continuity_k: float | None = None) -> Cloud:
+    """Inverse triangulation of every section with one plan (a band given by the user).
+
+    ``backend``: see :func:`make_runner`.
     """
     if method == "classic":
         from lts360.recon.triangulation.classic import classic_triangulate, view_regions
@@ -118,28 +171,145 @@ def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *
             for k, s in (progress(items) if progress else items)])
     if method != "inverse":
         raise ValueError(f"method must be 'inverse' or 'classic', got {method!r}")
-    if backend not in ("auto", "numpy", "llvm", "cuda"):
-        raise ValueError(f"backend must be auto, numpy, llvm or cuda, got {backend!r}")
-    fast = None
-    if peak == "centroid" and backend != "numpy":
-        from lts360.recon.triangulation.fast import FastInverse
+    measure = make_runner(cal, peak=peak, backend=backend, compensate=compensate,
+                          continuity_k=continuity_k)(
+        plan_inverse(cal, grid, precompute=False))
+    clouds = []
+    items = list(enumerate(sections))
+    for k, s in (progress(items) if progress else items):
+        clouds.append(result_to_cloud(measure(read_image(s.image_path)), z_mm=s.z_mm, section=k))
+    return Cloud.concatenate(clouds)
 
-        try:
-            fast = FastInverse(plan_inverse(cal, grid, precompute=False),
-                               backend="llvm" if backend == "auto" else backend)
-        except RuntimeError:
-            if backend != "auto":
-                raise
-    elif backend in ("llvm", "cuda"):
-        raise ValueError(f"the Dr.Jit backend implements the centroid detector only, not {peak!r}")
-    plan = fast.plan if fast is not None else plan_inverse(cal, grid, precompute=True)
+
+#: A band still holds the next section when at most this share of its windowed θ is TRUNCATED
+#: and it keeps this share of the valid points it had when it was found.
+BAND_MAX_TRUNCATED = 0.02
+BAND_MIN_KEPT = 0.8
+
+
+@dataclass
+class BandLog:
+    """What the band search did over a scan.
+
+    Attributes
+    ----------
+    coarse : str
+        The coarse search in words (:meth:`BandSearch.describe`).
+    half_width_mm : float
+    searched : list of int
+        Sections whose band was found by a coarse pass (the others reused the previous band).
+    found : list of bool
+        Per section: whether a profile was found (``False``: no stripe in the coarse pass).
+    r_range_mm : list of (float, float)
+        Per section: the radii its fine band spanned.
+    coarse_s, plan_s, fine_s : float
+        Seconds in coarse passes, in planning fine bands, in fine measurements.
+    """
+
+    coarse: str
+    half_width_mm: float
+    searched: list = field(default_factory=list)
+    found: list = field(default_factory=list)
+    r_range_mm: list = field(default_factory=list)
+    coarse_s: float = 0.0
+    plan_s: float = 0.0
+    fine_s: float = 0.0
+
+    def describe(self) -> str:
+        lo = min((a for a, _ in self.r_range_mm), default=float("nan"))
+        hi = max((b for _, b in self.r_range_mm), default=float("nan"))
+        return (f"band found from the image ({self.coarse}; fine band ±{self.half_width_mm:g} mm "
+                f"about the profile, r = {lo:.3f}–{hi:.3f} mm)")
+
+
+def _band_holds(res: InverseResult, n_valid_then: int) -> bool:
+    rows = sum(int(v.window.sum()) for v in res.views.values())
+    cut = sum(int(np.sum(v.quality == Quality.TRUNCATED)) for v in res.views.values())
+    valid = sum(int(v.valid.sum()) for v in res.views.values())
+    return rows > 0 and cut <= BAND_MAX_TRUNCATED * rows and valid >= BAND_MIN_KEPT * n_valid_then
+
+
+def measure_sections_following(sections: list[Section], cal: Calibration, *,
+                               theta_step_deg: float = DEFAULT_THETA_STEP_DEG,
+                               r_step_mm: float = DEFAULT_R_STEP_MM,
+                               half_width_mm: float | None = None, peak: str = "centroid",
+                               compensate: bool = False, backend: str = "auto",
+                               progress=None, continuity_k: float | None = None
+                               ) -> tuple[Cloud, CylGrid, BandLog]:
+    """Inverse triangulation with the radial band found from the image.
+
+    The first section runs the coarse pass (:class:`lts360.recon.triangulation.band.BandSearch`) and
+    measures a fine band that follows its profile; each next section reuses that band while it
+    holds (at most :data:`BAND_MAX_TRUNCATED` of its θ truncated, at least
+    :data:`BAND_MIN_KEPT` of the valid points kept), and otherwise runs the coarse pass again.
+    A section where the coarse pass finds no stripe is measured on the last band (or, for the
+    first, on a band about the middle of the measurable radii), so that its rows say what was
+    searched.
+
+    Returns
+    -------
+    cloud : Cloud
+    grid : CylGrid
+        The last fine grid (every fine grid has the same θ).
+    log : BandLog
+    """
+    import time
+
+    from lts360.recon.triangulation.band import DEFAULT_FOLLOW_HALF_WIDTH_MM, BandSearch
+
+    w = DEFAULT_FOLLOW_HALF_WIDTH_MM if half_width_mm is None else float(half_width_mm)
+    if not w > 0:
+        raise ValueError(f"half_width_mm must be > 0, got {half_width_mm}")
+    runner = make_runner(cal, peak=peak, backend=backend, compensate=compensate,
+                         continuity_k=continuity_k)
+    t0 = time.perf_counter()
+    search = BandSearch(cal, make_runner(cal, peak=peak, backend=backend))
+    log = BandLog(coarse=search.describe(), half_width_mm=w, plan_s=time.perf_counter() - t0)
+    current = None  # (grid, measure, n_valid when found)
     clouds = []
     items = list(enumerate(sections))
     for k, s in (progress(items) if progress else items):
         img = read_image(s.image_path)
-        if fast is not None:
-            res = fast(img, compensate=compensate)
+        res = None
+        if current is not None:
+            t = time.perf_counter()
+            res = current[1](img)
+            log.fine_s += time.perf_counter() - t
+            if not _band_holds(res, current[2]):
+                res = None
+        if res is None:
+            t = time.perf_counter()
+            profile = search.profile(img)
+            log.coarse_s += time.perf_counter() - t
+            log.searched.append(k)
+            log.found.append(profile is not None)
+            if profile is None:
+                if current is None:
+                    mid = 0.5 * sum(search.r_range_mm)
+                    from lts360.recon.triangulation.band import Profile
+
+                    th = search.grid.theta_rad
+                    profile = Profile(th, np.full(th.size, mid), np.zeros(th.size, bool), True)
+                else:
+                    profile = None
+            if profile is not None:
+                t = time.perf_counter()
+                from lts360.recon.triangulation.band import profile_windows
+
+                grid = search.fine_grid(profile, theta_step_deg=theta_step_deg,
+                                        r_step_mm=r_step_mm, half_width_mm=w)
+                plan = plan_inverse(cal, grid, precompute=False,
+                                    windows=profile_windows(cal, grid, profile))
+                measure = runner(plan)
+                log.plan_s += time.perf_counter() - t
+                current = (grid, measure, 0)
+            t = time.perf_counter()
+            res = current[1](img)
+            log.fine_s += time.perf_counter() - t
+            n_valid = sum(int(v.valid.sum()) for v in res.views.values())
+            current = (current[0], current[1], n_valid)
         else:
-            res = inverse_triangulate(img, cal, grid, peak=peak, compensate=compensate, plan=plan)
+            log.found.append(True)
+        log.r_range_mm.append(current[0].r_range_mm)
         clouds.append(result_to_cloud(res, z_mm=s.z_mm, section=k))
-    return Cloud.concatenate(clouds)
+    return Cloud.concatenate(clouds), current[0], log

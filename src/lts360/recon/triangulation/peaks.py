@@ -13,10 +13,17 @@ strictly above ``threshold`` that contains the largest sample.  Flags:
   one sample at or below it, reaches ``second_peak_fraction`` × the main maximum; the radius of
   the main (strongest) peak is still returned;
 * ``SATURATED`` — the largest sample is ``>= saturation`` (if given); radius still returned;
+* ``TRUNCATED`` — the main run touches the first or the last sample of the profile (the end of
+  the radial band) or a NaN sample (a point outside the image, or beyond the mirror through
+  which the view sees it): part of the line may lie beyond, so its centre is unknown.  The
+  radius of the part inside is still returned but never accepted as a point;
+* ``SATURATED_PLATEAU`` — more than ``max_plateau`` samples of the main run are ``>=
+  saturation``: the line's top is clipped over a width where the centre rests on the two
+  edges of the clipped region alone (blooming, a specular glint); never accepted;
 * ``FOUND`` — otherwise.
 
-``SEVERAL_PEAKS`` takes precedence over ``SATURATED``.  NaN samples (outside the image) count
-as below threshold and carry no weight.
+Precedence: ``NO_PEAK`` > ``TRUNCATED`` > ``SEVERAL_PEAKS`` > ``SATURATED_PLATEAU`` >
+``SATURATED``.  NaN samples count as below threshold and carry no weight.
 
 Detectors
 ---------
@@ -49,9 +56,13 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 __all__ = ["Quality", "PeakResult", "MainRun", "main_run", "centroid", "gauss", "steger",
-           "PEAK_DETECTORS", "detect_peaks", "steger_sigma_mm", "DEFAULT_SECOND_PEAK_FRACTION"]
+           "PEAK_DETECTORS", "detect_peaks", "steger_sigma_mm", "DEFAULT_SECOND_PEAK_FRACTION",
+           "DEFAULT_MAX_PLATEAU_MM", "plateau_samples"]
 
 DEFAULT_SECOND_PEAK_FRACTION = 0.5
+#: Widest saturated plateau (along the radius) still located: about the line's standard
+#: deviation along the grid ray on the paper rig (0.1–0.2 mm, the 0.6 mm sheet seen at α ≈ 40°).
+DEFAULT_MAX_PLATEAU_MM = 0.15
 
 
 class Quality(IntEnum):
@@ -63,6 +74,13 @@ class Quality(IntEnum):
     SEVERAL_PEAKS = 3
     #: Set by :func:`lts360.recon.triangulation.inverse.inverse_triangulate` only: θ outside the view's window.
     OUTSIDE_WINDOW = 4
+    #: The main run touches the end of the band, the image border or the view's mirror edge.
+    TRUNCATED = 5
+    #: A saturated plateau wider than the stated limit (``max_plateau_mm``).
+    SATURATED_PLATEAU = 6
+    #: Set by :mod:`lts360.recon.triangulation.reject`: off a robust local fit of the view's
+    #: r(θ) by more than k·σ (truth-free rejection of a spurious point).
+    DISCONTINUOUS = 7
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,7 +90,8 @@ class PeakResult:
     Attributes
     ----------
     r_mm : (n,) float
-        Sub-sample radius of the line centre; NaN where ``quality == NO_PEAK``.
+        Sub-sample radius of the line centre; NaN where ``quality == NO_PEAK`` (and where a
+        ``TRUNCATED`` line gave no centre).
     quality : (n,) uint8
         :class:`Quality` values.
     intensity : (n,) float
@@ -134,8 +153,20 @@ def _check_levels(threshold, saturation, fraction) -> None:
         raise ValueError(f"second_peak_fraction must be in (0, 1], got {fraction}")
 
 
+def plateau_samples(max_plateau_mm: float | None, r_mm) -> int | None:
+    """The plateau limit in samples of the radii ``r_mm`` (``None``: no limit)."""
+    if max_plateau_mm is None:
+        return None
+    if not max_plateau_mm >= 0:
+        raise ValueError(f"max_plateau_mm must be >= 0 or None, got {max_plateau_mm!r}")
+    r = np.asarray(r_mm, dtype=float)
+    step = (r[-1] - r[0]) / (r.size - 1)
+    return int(math.floor(max_plateau_mm / step * (1 + 1e-9)))
+
+
 def main_run(profiles, threshold: float, *, saturation: float | None = None,
-             second_peak_fraction: float = DEFAULT_SECOND_PEAK_FRACTION) -> MainRun:
+             second_peak_fraction: float = DEFAULT_SECOND_PEAK_FRACTION,
+             max_plateau: int | None = None) -> MainRun:
     """Main run, peak and quality flag of each profile (shared by all detectors).
 
     Parameters
@@ -148,6 +179,9 @@ def main_run(profiles, threshold: float, *, saturation: float | None = None,
     second_peak_fraction : float, (0, 1]
         A separate run whose maximum reaches this fraction of the main maximum flags
         ``SEVERAL_PEAKS``.
+    max_plateau : int, optional
+        More samples of the main run ``>= saturation`` flag ``SATURATED_PLATEAU`` (no limit
+        by default, or without ``saturation``).
     """
     _check_levels(threshold, saturation, second_peak_fraction)
     p = np.asarray(profiles, dtype=float)
@@ -166,17 +200,25 @@ def main_run(profiles, threshold: float, *, saturation: float | None = None,
     run = (idx > left[:, None]) & (idx < right[:, None]) & has[:, None]
     other = np.where(above & ~run, vals, -np.inf).max(axis=1)
     several = has & (other >= second_peak_fraction * peak)
+    # Truncated: the run reaches either end of the profile, or borders a NaN sample.
+    at_left = (left < 0) | nan[rows, np.maximum(left, 0)]
+    at_right = (right >= nr) | nan[rows, np.minimum(right, nr - 1)]
+    truncated = has & (at_left | at_right)
     quality = np.full(n, Quality.FOUND, dtype=np.uint8)
     if saturation is not None:
         quality[has & (peak >= saturation)] = Quality.SATURATED
+        if max_plateau is not None:
+            wide = (run & (vals >= saturation)).sum(axis=1) > max_plateau
+            quality[has & wide] = Quality.SATURATED_PLATEAU
     quality[several] = Quality.SEVERAL_PEAKS
+    quality[truncated] = Quality.TRUNCATED
     quality[~has] = Quality.NO_PEAK
     return MainRun(values=vals, imax=imax, peak=peak, run=run, quality=quality)
 
 
 def _result(r: np.ndarray, quality: np.ndarray, peak: np.ndarray) -> PeakResult:
     quality = quality.copy()
-    bad = ~np.isfinite(r)
+    bad = ~np.isfinite(r) & (quality != Quality.TRUNCATED)  # a cut line keeps its reason
     quality[bad] = Quality.NO_PEAK
     r = np.where(quality == Quality.NO_PEAK, np.nan, r)
     return PeakResult(r_mm=r, quality=quality, intensity=np.where(np.isfinite(peak), peak, np.nan))
@@ -184,7 +226,8 @@ def _result(r: np.ndarray, quality: np.ndarray, peak: np.ndarray) -> PeakResult:
 
 def centroid(profiles, r_mm, *, threshold: float, saturation: float | None = None,
              second_peak_fraction: float = DEFAULT_SECOND_PEAK_FRACTION,
-             subtract_threshold: bool = True) -> PeakResult:
+             subtract_threshold: bool = True,
+             max_plateau_mm: float | None = DEFAULT_MAX_PLATEAU_MM) -> PeakResult:
     """Thresholded centroid of the main run (the paper's detector).
 
     Parameters
@@ -199,9 +242,13 @@ def centroid(profiles, r_mm, *, threshold: float, saturation: float | None = Non
     second_peak_fraction : float, (0, 1]
     subtract_threshold : bool
         Weights ``I − threshold`` (default) or ``I``.
+    max_plateau_mm : float, optional
+        Widest saturated plateau located (``SATURATED_PLATEAU`` beyond; the three detectors
+        share it); ``None``: no limit.
     """
     p, r = _check(profiles, r_mm, uniform=False)
-    mr = main_run(p, threshold, saturation=saturation, second_peak_fraction=second_peak_fraction)
+    mr = main_run(p, threshold, saturation=saturation, second_peak_fraction=second_peak_fraction,
+                  max_plateau=plateau_samples(max_plateau_mm, r))
     w = np.where(mr.run, mr.values - (threshold if subtract_threshold else 0.0), 0.0)
     sw = w.sum(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -211,7 +258,7 @@ def centroid(profiles, r_mm, *, threshold: float, saturation: float | None = Non
 
 def gauss(profiles, r_mm, *, threshold: float, saturation: float | None = None,
           second_peak_fraction: float = DEFAULT_SECOND_PEAK_FRACTION,
-          fit: str = "lsq") -> PeakResult:
+          fit: str = "lsq", max_plateau_mm: float | None = DEFAULT_MAX_PLATEAU_MM) -> PeakResult:
     """Gaussian (log-parabola) fit of the line profile.
 
     Parameters
@@ -234,7 +281,8 @@ def gauss(profiles, r_mm, *, threshold: float, saturation: float | None = None,
         raise ValueError(f"fit must be 'lsq' or '3point', got {fit!r}")
     if threshold < 0:
         raise ValueError(f"threshold must be >= 0 for a log fit, got {threshold}")
-    mr = main_run(p, threshold, saturation=saturation, second_peak_fraction=second_peak_fraction)
+    mr = main_run(p, threshold, saturation=saturation, second_peak_fraction=second_peak_fraction,
+                  max_plateau=plateau_samples(max_plateau_mm, r))
     step = r[1] - r[0]
     n, nr = p.shape
     rows = np.arange(n)
@@ -319,7 +367,8 @@ def _gaussian_derivative_at(profiles: np.ndarray, index: np.ndarray, sigma: floa
 def steger(profiles, r_mm, *, threshold: float, saturation: float | None = None,
            second_peak_fraction: float = DEFAULT_SECOND_PEAK_FRACTION,
            line_width_mm: float = 0.2, sigma_mm: float | None = None,
-           subsample: str = "linear") -> PeakResult:
+           subsample: str = "linear",
+           max_plateau_mm: float | None = DEFAULT_MAX_PLATEAU_MM) -> PeakResult:
     """Steger-style line centre: zero of the Gaussian-smoothed first derivative.
 
     Parameters
@@ -356,7 +405,8 @@ def steger(profiles, r_mm, *, threshold: float, saturation: float | None = None,
     sigma = steger_sigma_mm(line_width_mm) if sigma_mm is None else float(sigma_mm)
     if not sigma >= 0.5 * step * (1 - 1e-9):
         raise ValueError(f"sigma_mm must be >= half a radial step ({0.5 * step:g} mm), got {sigma}")
-    mr = main_run(p, threshold, saturation=saturation, second_peak_fraction=second_peak_fraction)
+    mr = main_run(p, threshold, saturation=saturation, second_peak_fraction=second_peak_fraction,
+                  max_plateau=plateau_samples(max_plateau_mm, r))
     zero = np.where(np.isnan(p), 0.0, p)
     s = sigma / step
     if subsample not in ("linear", "taylor"):

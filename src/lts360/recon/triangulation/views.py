@@ -37,7 +37,7 @@ from lts360.geometry.mirror import mirror_matrix, transform_plane
 from lts360.recon.calibration.model import Calibration
 
 __all__ = ["View", "make_views", "get_views", "view_transform", "project_meas_points",
-           "view_windows", "DEFAULT_MAX_INCIDENCE_DEG", "DIRECT"]
+           "view_windows", "seen_through_mirrors", "DEFAULT_MAX_INCIDENCE_DEG", "DIRECT"]
 
 DIRECT = "direct"
 DEFAULT_MAX_INCIDENCE_DEG = 80.0
@@ -244,16 +244,42 @@ def _path_ok(points: np.ndarray, camera: np.ndarray, seq: tuple[str, ...],
     return ok, leave
 
 
+def seen_through_mirrors(cal: Calibration, view: View, points_meas_mm) -> np.ndarray:
+    """Whether each point's straight path to the view's virtual camera, folded at its mirrors,
+    meets each mirror on its reflecting side and inside its known extent, and crosses no other
+    mirror of known extent (the path test of the windows without the object: a grid point
+    beyond a mirror's edge is not seen in this view, whatever the image shows there).
+
+    Parameters
+    ----------
+    points_meas_mm : (..., 3) float
+
+    Returns
+    -------
+    (...) bool
+        All True for the direct view and for mirrors of unknown extent.
+    """
+    pts = np.asarray(points_meas_mm, dtype=float)
+    flat = pts.reshape(-1, 3)
+    if not view.mirrors:
+        return np.ones(pts.shape[:-1], dtype=bool)
+    mirrors = _mirrors_in_meas(cal)
+    camera = cal.T_meas_cam[:3, 3].copy()
+    ok, _ = _path_ok(flat, camera, view.mirrors, mirrors, 0.0)
+    return ok.reshape(pts.shape[:-1])
+
+
 def view_windows(cal: Calibration, radius_range_mm, theta_rad, max_incidence_deg: float =
                  DEFAULT_MAX_INCIDENCE_DEG, *, views=None, n_radii: int = DEFAULT_WINDOW_RADII,
-                 margin_px: float = 0.0) -> dict[str, np.ndarray]:
+                 margin_px: float = 0.0, normal_angle_rad=None) -> dict[str, np.ndarray]:
     """Per-view θ windows derived from the calibration (see the module docstring).
 
     Parameters
     ----------
     cal : Calibration
-    radius_range_mm : (float, float)
-        ``(r_min, r_max)`` of the grid; the tests hold at ``n_radii`` radii spread over it.
+    radius_range_mm : (float, float), or two (nθ,) float
+        ``(r_min, r_max)`` of the grid, the same at every θ or one per θ (a grid that follows
+        a profile); the tests hold at ``n_radii`` radii spread over it.
     theta_rad : (nθ,) float
         Grid angles (measurement frame).
     max_incidence_deg : float, (0, 90]
@@ -262,19 +288,24 @@ def view_windows(cal: Calibration, radius_range_mm, theta_rad, max_incidence_deg
         Default: direct and every single-mirror view.
     n_radii : int, >= 1
     margin_px : float, >= 0
+    normal_angle_rad : (nθ,) float, optional
+        Direction of the surface's outward normal in the laser plane at each θ (default θ:
+        a section centred on the axis); from a first-pass profile ``r(θ)`` it is
+        ``θ − atan(r′/r)``, which keeps the facing test right for a part off the axis.
 
     Returns
     -------
     dict str → (nθ,) bool
     """
-    r0, r1 = (float(v) for v in radius_range_mm)
-    if not 0 < r0 <= r1:
-        raise ValueError(f"radius_range_mm must satisfy 0 < r_min <= r_max, got {radius_range_mm}")
+    theta = np.asarray(theta_rad, dtype=float).ravel()
+    r0, r1 = (np.broadcast_to(np.asarray(v, dtype=float), theta.shape) for v in radius_range_mm)
+    if not (np.all(0 < r0) and np.all(r0 <= r1)):
+        raise ValueError(f"radius_range_mm must satisfy 0 < r_min <= r_max, got "
+                         f"{np.min(r0)}..{np.max(r1)}")
     if not 0 < max_incidence_deg <= 90:
         raise ValueError(f"max_incidence_deg must be in (0, 90], got {max_incidence_deg}")
     if n_radii < 1 or margin_px < 0:
         raise ValueError(f"n_radii must be >= 1 and margin_px >= 0, got {n_radii}, {margin_px}")
-    theta = np.asarray(theta_rad, dtype=float).ravel()
     if views is None:
         view_list = tuple(make_views(cal).values())
     else:
@@ -282,14 +313,18 @@ def view_windows(cal: Calibration, radius_range_mm, theta_rad, max_incidence_deg
     mirrors = _mirrors_in_meas(cal)
     camera = cal.T_meas_cam[:3, 3].copy()  # camera centre in the measurement frame
     cos_max = np.cos(np.radians(max_incidence_deg))
-    normal = np.stack([np.cos(theta), np.sin(theta), np.zeros_like(theta)], axis=-1)
+    radial = np.stack([np.cos(theta), np.sin(theta), np.zeros_like(theta)], axis=-1)
+    psi = theta if normal_angle_rad is None else np.asarray(normal_angle_rad, float).ravel()
+    if psi.shape != theta.shape:
+        raise ValueError(f"normal_angle_rad must have shape {theta.shape}, got {psi.shape}")
+    normal = np.stack([np.cos(psi), np.sin(psi), np.zeros_like(psi)], axis=-1)
     w, h = cal.image_size
-    radii = np.linspace(r0, r1, n_radii) if n_radii > 1 else np.array([0.5 * (r0 + r1)])
+    radii = np.linspace(r0, r1, n_radii) if n_radii > 1 else (0.5 * (r0 + r1))[None]
     out = {}
     for view in view_list:
         ok = np.ones(theta.size, dtype=bool)
         for r in radii:
-            pts = normal * r
+            pts = radial * r[:, None]
             path, leave = _path_ok(pts, camera, view.mirrors, mirrors, r)
             ok &= path & (np.einsum("ij,ij->i", leave, normal) > cos_max)
             uv = project_meas_points(pts, cal, view)
