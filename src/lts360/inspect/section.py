@@ -1,0 +1,131 @@
+"""Everything measured on one section: centre, diameters, ovality, roundness against the four
+reference circles, harmonics, coverage and gaps.
+
+The form quantities are computed on the binned profile about the LS centre
+(:func:`lts360.inspect.profile.bin_profile`: 0.5° bins, each direction counted once where views
+overlap); the LS circle itself on every valid point.  The scatter ``σ`` of the points about
+their bin's mean (views included) feeds the uncertainty (:mod:`lts360.inspect.uncertainty`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lts360.inspect.circles import ReferenceCircle, least_squares_circle, reference_circles
+from lts360.inspect.diameters import Diameters, diameters
+from lts360.inspect.harmonics import Harmonics, fit_harmonics
+from lts360.inspect.profile import (DEFAULT_BIN_DEG, DEFAULT_GAP_DEG, BinnedProfile, Gap,
+                                    bin_profile, coverage_deg, gaps, interp_profile,
+                                    uniform_profile)
+
+__all__ = ["SectionResult", "analyse_section", "MIN_POINTS"]
+
+#: Fewest valid points a section needs to be inspected (a circle and a few lobes).
+MIN_POINTS = 12
+
+
+@dataclass(frozen=True, eq=False)
+class SectionResult:
+    """One inspected section (mm, deg).
+
+    Attributes
+    ----------
+    index : int
+        The cloud's section number.
+    z_mm : float
+        Stage position.
+    n_valid, n_samples : int
+        Valid points and every θ sample of the section.
+    coverage_deg : float
+    gaps : list of Gap
+    circles : dict name → ReferenceCircle
+    diameters : Diameters
+    harmonics : Harmonics
+    scatter_mm : float
+        Standard deviation of one point about its bin's mean.
+    points_per_bin : float
+        Mean number of points in a bin.
+    profile : BinnedProfile
+    xy_mm : (n, 2) float
+        The valid points.
+    """
+
+    index: int
+    z_mm: float
+    n_valid: int
+    n_samples: int
+    coverage_deg: float
+    gaps: list[Gap]
+    circles: dict[str, ReferenceCircle]
+    diameters: Diameters
+    harmonics: Harmonics
+    scatter_mm: float
+    points_per_bin: float
+    profile: BinnedProfile
+    xy_mm: np.ndarray
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def ls(self) -> ReferenceCircle:
+        return self.circles["LSCI"]
+
+
+def _scatter(xy: np.ndarray, profile: BinnedProfile) -> tuple[float, float]:
+    """σ of one point about the binned profile interpolated at its θ (the profile's own slope
+    and the bins' averaging removed), and the mean points per bin."""
+    d = xy - profile.centre_mm
+    res = np.hypot(d[:, 0], d[:, 1]) - interp_profile(profile, np.arctan2(d[:, 1], d[:, 0]),
+                                                      gap_deg=360.0)
+    dof = len(res) - len(profile.r_mm)
+    sigma = float(np.sqrt(res @ res / dof)) if dof > 0 else float("nan")
+    return sigma, float(np.mean(profile.count))
+
+
+def analyse_section(xy_mm, *, index: int = 0, z_mm: float = 0.0, theta_invalid_rad=None,
+                    quality_invalid=None, theta_valid_rad=None,
+                    bin_deg: float = DEFAULT_BIN_DEG,
+                    gap_deg: float = DEFAULT_GAP_DEG) -> SectionResult:
+    """Inspect one section.
+
+    Parameters
+    ----------
+    xy_mm : (n, 2) float
+        Its valid points in the measurement frame.
+    theta_valid_rad : (n,) float, optional
+        Their θ as measured (about the measurement axis; default: computed from ``xy_mm``):
+        coverage and gaps are counted in these.
+    theta_invalid_rad, quality_invalid : (m,) float, (m,) int, optional
+        The section's invalid samples (named in the gaps).
+
+    Raises
+    ------
+    ValueError
+        Fewer than :data:`MIN_POINTS` valid points.
+    """
+    xy = np.asarray(xy_mm, dtype=float)
+    if xy.ndim != 2 or xy.shape[1] != 2:
+        raise ValueError(f"xy_mm must have shape (n, 2), got {xy.shape}")
+    if len(xy) < MIN_POINTS:
+        raise ValueError(f"section {index} (z = {z_mm:g} mm): {len(xy)} valid points, at least "
+                         f"{MIN_POINTS} needed")
+    th_meas = np.arctan2(xy[:, 1], xy[:, 0]) if theta_valid_rad is None else theta_valid_rad
+    ls = least_squares_circle(xy)
+    prof = bin_profile(xy, ls.centre_mm, bin_deg=bin_deg)
+    pxy = prof.xy_mm if len(prof.r_mm) >= MIN_POINTS else xy
+    circles = reference_circles(pxy)
+    circles["LSCI"] = ls  # the LS circle of every point; the others on the binned profile
+    sigma, per_bin = _scatter(xy, prof)
+    th_u, r_u = uniform_profile(prof, gap_deg=gap_deg)
+    harm = (fit_harmonics(th_u, r_u) if np.all(np.isfinite(r_u))
+            else fit_harmonics(prof.theta_rad, prof.r_mm))
+    n_inv = 0 if quality_invalid is None else len(quality_invalid)
+    return SectionResult(
+        index=int(index), z_mm=float(z_mm), n_valid=len(xy), n_samples=len(xy) + n_inv,
+        coverage_deg=coverage_deg(th_meas, gap_deg=gap_deg),
+        gaps=gaps(th_meas, theta_invalid_rad=theta_invalid_rad, quality_invalid=quality_invalid,
+                  gap_deg=gap_deg),
+        circles=circles, diameters=diameters(prof, gap_deg=gap_deg),
+        harmonics=harm, scatter_mm=sigma,
+        points_per_bin=per_bin, profile=prof, xy_mm=xy)
