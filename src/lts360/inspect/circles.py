@@ -140,7 +140,7 @@ def minimum_zone_circle(xy_mm, *, start_mm=None, tol_mm: float = MZ_TOLERANCE_MM
     c = least_squares_circle(xy).centre_mm if start_mm is None else np.asarray(start_mm, float)
     r = _radii(xy, c)
     f = r.max() - r.min()
-    rho = max(0.25 * f, 10 * tol_mm)
+    rho = max(0.1 * f, 10 * tol_mm)
     for _ in range(max_iterations):
         band = 2.0 * np.sqrt(2.0) * rho
         act = (r >= r.max() - band) | (r <= r.min() + band)
@@ -185,7 +185,7 @@ def minimum_circumscribed_circle(xy_mm) -> ReferenceCircle:
     return _circle("MCCI", xy, centre, max(radius, float(_radii(xy, centre).max())))
 
 
-def maximum_inscribed_circle(xy_mm, *, tol_mm: float = 1e-5) -> ReferenceCircle:
+def maximum_inscribed_circle(xy_mm, *, tol_mm: float = 1e-4) -> ReferenceCircle:
     """MICI: the largest circle inside the polygon of the points in angular order (shapely).
 
     ``tol_mm`` is the search tolerance of ``shapely.maximum_inscribed_circle`` (its result is

@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import cho_factor, cho_solve
 
 __all__ = ["Harmonics", "fit_harmonics", "DEFAULT_MAX_ORDER"]
 
@@ -81,7 +82,7 @@ def fit_harmonics(theta_rad, r_mm, *, max_order: int = DEFAULT_MAX_ORDER) -> Har
         A = np.column_stack([np.ones_like(th), np.cos(kt), np.sin(kt)])
         N = np.einsum("ij,ik->jk", A, A)  # normal equations (small: BLAS threads cost more)
         N[np.diag_indices_from(N)] *= 1.0 + 1e-10
-        coef = np.linalg.solve(N, np.einsum("ij,i->j", A, r))
+        coef = cho_solve(cho_factor(N), np.einsum("ij,i->j", A, r))
         a0, a, b = float(coef[0]), coef[1:K + 1], coef[K + 1:]
         res = r - A @ coef
     dof = max(1, n - (2 * K + 1))

@@ -19,7 +19,8 @@ import numpy as np
 from lts360.recon.triangulation.peaks import Quality
 
 __all__ = ["ACCEPTED_QUALITY", "valid_mask", "BinnedProfile", "bin_profile", "Gap", "gaps",
-           "coverage_deg", "interp_profile", "uniform_profile", "DEFAULT_BIN_DEG", "DEFAULT_GAP_DEG"]
+           "coverage_deg", "interp_profile", "uniform_profile", "DEFAULT_BIN_DEG",
+           "DEFAULT_GAP_DEG"]
 
 #: Quality codes whose points are measurements (the others are reasons for no point).
 ACCEPTED_QUALITY = (int(Quality.FOUND), int(Quality.SATURATED))
