@@ -186,7 +186,13 @@ def read_contour_dxf(path) -> Nominal:
     for e in doc.modelspace():
         if e.dxftype() not in ("LWPOLYLINE", "POLYLINE", "CIRCLE", "ELLIPSE", "SPLINE"):
             continue
-        pts = np.array([(v.x, v.y) for v in dxfpath.make_path(e).flattening(1e-4 / scale)])
+        if e.dxftype() in ("CIRCLE", "ELLIPSE"):  # vertices on the exact curve
+            verts = list(e.flattening(1e-4 / scale))
+            if (verts[-1] - verts[0]).magnitude > 0:
+                verts.append(verts[0])
+        else:
+            verts = dxfpath.make_path(e).flattening(1e-4 / scale)
+        pts = np.array([(v.x, v.y) for v in verts])
         if len(pts) < 4 or np.hypot(*(pts[-1] - pts[0])) * scale > CLOSURE_MM:
             open_ones += 1
             continue
