@@ -11,7 +11,7 @@ from _profiles import scan_cloud
 
 
 def test_a_dent_is_a_neck_down_at_its_z():
-    cloud = scan_cloud(n_sections=25, dent_mm=0.1, dent_z_mm=1.36, dent_sigma_z_mm=1.0,
+    cloud = scan_cloud(n_sections=17, dent_mm=0.1, dent_z_mm=1.36, dent_sigma_z_mm=1.0,
                        ovality_mm=0.0)
     ins = inspect_cloud(cloud)
     ev = ins.data["scan"]["events"]
