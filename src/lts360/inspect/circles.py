@@ -124,7 +124,8 @@ def minimum_zone_circle(xy_mm, *, start_mm=None, tol_mm: float = MZ_TOLERANCE_MM
     subject to ``t_in ≤ r_i − u_i·δ ≤ t_out`` and ``|δ|∞ ≤ ρ``.  A step is kept when the exact
     peak-to-valley falls (``ρ`` then doubles when the step reached it, else shrinks to the
     step), otherwise ``ρ`` is halved; it stops when the LP predicts a gain below
-    ``tol_mm / 1000`` or ``ρ < tol_mm``.  Only
+    ``tol_mm / 1000``, when a step inside the trust region gains less than ``tol_mm``, or when
+    ``ρ < tol_mm``.  Only
     points within ``2√2 ρ`` of the current extremes can become extreme after a step, so only
     those enter the LP.
 
@@ -161,7 +162,10 @@ def minimum_zone_circle(xy_mm, *, start_mm=None, tol_mm: float = MZ_TOLERANCE_MM
         r_new = _radii(xy, c_new)
         f_new = r_new.max() - r_new.min()
         if f_new < f:
+            gain = f - f_new
             c, r, f = c_new, r_new, f_new
+            if gain < tol_mm and step < 0.99 * rho:
+                break  # an interior step that gained less than the tolerance: converged
             rho = 2.0 * rho if step > 0.99 * rho else max(step, tol_mm)
         else:
             rho /= 2.0
