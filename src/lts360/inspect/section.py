@@ -1,9 +1,9 @@
 """Everything measured on one section: centre, diameters, ovality, roundness against the four
 reference circles, harmonics, coverage and gaps.
 
-The form quantities are computed on the binned profile about the LS centre
+Every quantity is computed on the binned profile about the LS centre
 (:func:`lts360.inspect.profile.bin_profile`: 0.5° bins, each direction counted once where views
-overlap); the LS circle itself on every valid point.  The scatter ``σ`` of the points about
+overlap), the LS circle included.  The scatter ``σ`` of the points about
 their bin's mean (views included) feeds the uncertainty (:mod:`lts360.inspect.uncertainty`).
 """
 
@@ -111,11 +111,15 @@ def analyse_section(xy_mm, *, index: int = 0, z_mm: float = 0.0, theta_invalid_r
         raise ValueError(f"section {index} (z = {z_mm:g} mm): {len(xy)} valid points, at least "
                          f"{MIN_POINTS} needed")
     th_meas = np.arctan2(xy[:, 1], xy[:, 0]) if theta_valid_rad is None else theta_valid_rad
-    ls = least_squares_circle(xy)
-    prof = bin_profile(xy, ls.centre_mm, bin_deg=bin_deg)
+    # The LS circle of the binned profile: each direction weighs the same however many views
+    # saw it (on a non-round section the plain LS circle of the points moves with the
+    # sampling).  Binned about the LS centre of the points, fitted, binned again.
+    prof = bin_profile(xy, least_squares_circle(xy).centre_mm, bin_deg=bin_deg)
+    if len(prof.r_mm) >= MIN_POINTS:
+        prof = bin_profile(xy, least_squares_circle(prof.xy_mm).centre_mm, bin_deg=bin_deg)
     pxy = prof.xy_mm if len(prof.r_mm) >= MIN_POINTS else xy
     circles = reference_circles(pxy)
-    circles["LSCI"] = ls  # the LS circle of every point; the others on the binned profile
+    ls = circles["LSCI"]
     sigma, per_bin = _scatter(xy, prof)
     th_u, r_u = uniform_profile(prof, gap_deg=gap_deg)
     harm = (fit_harmonics(th_u, r_u) if np.all(np.isfinite(r_u))
