@@ -38,6 +38,7 @@ def files(tmp_path_factory):
     (("scan.ply", "--nominal", "plug-gauge", "--upper-mm", "-0.1", "--lower-mm", "0.1"),
      "upper"),
     (("scan.ply", "--lump-mm", "abc"), "--lump-mm"),
+    (("scan.ply", "--u-radial-mm", "-0.001"), "--u-radial-mm"),
     (("nope.ply",), "nope.ply"),
     (("scan.ply", "--calibration", "nope.json"), "nope.json"),
     (("scan.ply", "--truth", "."), "--truth"),
@@ -60,3 +61,16 @@ def test_a_report_from_a_cloud_file(files, tmp_path, capsys):
     data = json.loads((out / "inspection.json").read_text())
     assert data["n_sections"] == 3 and data["nominal"]["pass"] is True
     assert "PASS" in capsys.readouterr().out
+
+
+def test_a_radial_offset_adds_to_sizes_only():
+    from lts360.inspect.run import inspect_cloud
+
+    cloud = scan_cloud(n_sections=1, noise_mm=0.002)
+    a = inspect_cloud(cloud).data["sections"][0]
+    b = inspect_cloud(cloud, u_radial_mm=0.003).data["sections"][0]
+    assert b["d_ls_mm"]["u"] == pytest.approx(np.hypot(a["d_ls_mm"]["u"], 0.006))
+    assert b["d_min_mm"]["u"] == pytest.approx(np.hypot(a["d_min_mm"]["u"], 0.006))
+    for key in ("ovality_mm", "centre_x_mm"):
+        assert b[key]["u"] == a[key]["u"]
+    assert b["ront_mm"]["MZCI"]["u"] == a["ront_mm"]["MZCI"]["u"]

@@ -304,6 +304,8 @@ def cmd_inspect(args) -> int:
         raise UsageError("--upper-mm/--lower-mm: give both limits")
     if not args.lump_mm > 0:
         raise UsageError(f"--lump-mm: must be > 0, got {args.lump_mm}")
+    if not (args.u_radial_mm >= 0 and np.isfinite(args.u_radial_mm)):
+        raise UsageError(f"--u-radial-mm: must be >= 0, got {args.u_radial_mm}")
     if not 2 <= args.draws <= 10000:
         raise UsageError(f"--draws: must be in [2, 10000], got {args.draws}")
     band = None
@@ -328,6 +330,7 @@ def cmd_inspect(args) -> int:
     t0 = time.perf_counter()
     ins = inspect_cloud(cloud, nominal=nominal, band=band, calibration=cal, truth=truth,
                         lump_threshold_mm=args.lump_mm, n_draws=args.draws, seed=args.seed,
+                        u_radial_mm=args.u_radial_mm,
                         source=str(args.cloud))
     write_report(ins, out)
     d = ins.data

@@ -137,6 +137,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "values beside the measured ones")
     s.add_argument("--lump-mm", type=float, default=0.05,
                    help="lump / neck-down threshold on Dmax / Dmin (default 0.05)")
+    s.add_argument("--u-radial-mm", type=float, default=0.0,
+                   help="type-B standard uncertainty of a radial offset common to a section "
+                        "(the rig's error budget): 2u on diameters, u on deviations")
     s.add_argument("--draws", type=int, default=20, help="calibration Monte Carlo draws")
     s.add_argument("--seed", type=int, default=0)
     s.set_defaults(func=cmd_inspect)

@@ -43,8 +43,9 @@ def _q(value, *u_parts) -> dict:
     return {"value": v, **combine(*u_parts)}
 
 
-def _section_dict(s: SectionResult, us: dict, uc: dict | None) -> dict:
+def _section_dict(s: SectionResult, us: dict, uc: dict | None, u_radial_mm: float) -> dict:
     g = (uc or {}).get
+    ub = 2.0 * u_radial_mm if u_radial_mm else None  # a common radial offset: 2u on sizes
     d = s.diameters
     ls = s.ls
     out = {"index": s.index, "z_mm": s.z_mm, "n_valid": s.n_valid, "n_samples": s.n_samples,
@@ -54,15 +55,15 @@ def _section_dict(s: SectionResult, us: dict, uc: dict | None) -> dict:
            "scatter_mm": s.scatter_mm, "points_per_bin": s.points_per_bin,
            "centre_x_mm": _q(ls.centre_mm[0], us["centre_x_mm"], g("centre_x_mm")),
            "centre_y_mm": _q(ls.centre_mm[1], us["centre_y_mm"], g("centre_y_mm")),
-           "d_ls_mm": _q(ls.diameter_mm, us["d_ls_mm"], g("d_ls_mm")),
-           "d_mean_mm": _q(d.d_mean_mm, us["d_mean_mm"], g("d_mean_mm")),
-           "d_min_mm": _q(d.d_min_mm, us["d_min_mm"], g("d_min_mm")),
-           "d_max_mm": _q(d.d_max_mm, us["d_max_mm"], g("d_max_mm")),
+           "d_ls_mm": _q(ls.diameter_mm, us["d_ls_mm"], g("d_ls_mm"), ub),
+           "d_mean_mm": _q(d.d_mean_mm, us["d_mean_mm"], g("d_mean_mm"), ub),
+           "d_min_mm": _q(d.d_min_mm, us["d_min_mm"], g("d_min_mm"), ub),
+           "d_max_mm": _q(d.d_max_mm, us["d_max_mm"], g("d_max_mm"), ub),
            "phi_d_min_deg": d.phi_d_min_deg, "phi_d_max_deg": d.phi_d_max_deg,
            "n_directions_measured": d.n_directions_measured,
            "ovality_mm": _q(d.ovality_mm, us["ovality_mm"], g("ovality_mm")),
-           "calliper_min_mm": _q(d.calliper_min_mm, us["calliper_mm"], g("d_min_mm")),
-           "calliper_max_mm": _q(d.calliper_max_mm, us["calliper_mm"], g("d_max_mm"))}
+           "calliper_min_mm": _q(d.calliper_min_mm, us["calliper_mm"], g("d_min_mm"), ub),
+           "calliper_max_mm": _q(d.calliper_max_mm, us["calliper_mm"], g("d_max_mm"), ub)}
     uo = out["ovality_mm"]["u"]
     if np.isfinite(d.ovality_mm):
         out["ovality_over_sum_pct"] = _q(d.ovality_over_sum_pct,
@@ -75,7 +76,7 @@ def _section_dict(s: SectionResult, us: dict, uc: dict | None) -> dict:
     out["reference_circles"] = {
         name: {"centre_x_mm": float(c.centre_mm[0]), "centre_y_mm": float(c.centre_mm[1]),
                "diameter_mm": _q(c.diameter_mm, us["d_ls_mm"] if name == "LSCI"
-                                 else us["size_ref_mm"], g("d_ls_mm"))}
+                                 else us["size_ref_mm"], g("d_ls_mm"), ub)}
         for name, c in s.circles.items()}
     h = s.harmonics
     k_dom, a_dom = h.dominant()
@@ -111,7 +112,7 @@ def _truth_rows(truth, sections: list[SectionResult]) -> tuple[dict, list]:
 def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
                   band: ToleranceBand | None = None, calibration=None, truth=None,
                   lump_threshold_mm: float = scan_mod.DEFAULT_LUMP_MM,
-                  n_draws: int = DEFAULT_DRAWS, seed: int = 0,
+                  n_draws: int = DEFAULT_DRAWS, seed: int = 0, u_radial_mm: float = 0.0,
                   bin_deg: float = DEFAULT_BIN_DEG, gap_deg: float = DEFAULT_GAP_DEG,
                   source: str = "") -> Inspection:
     """Inspect every section of ``cloud``.
@@ -127,12 +128,18 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         The one the cloud was measured with; its covariance gives the calibration u.
     truth : path or (SceneObject, z list), optional
         A rendered frame or scan: true values beside the measured ones.
+    u_radial_mm : float, >= 0
+        Type-B standard uncertainty of a radial offset common to a section (the rig's error
+        budget or a reference measurement's bias): 2u on every diameter, u on a deviation,
+        nothing on centre, ovality, roundness or harmonics, where it cancels.
 
     Raises
     ------
     NoValidPoints
         No section has :data:`MIN_POINTS` valid points.
     """
+    if not (u_radial_mm >= 0 and np.isfinite(u_radial_mm)):
+        raise ValueError(f"--u-radial-mm: must be >= 0, got {u_radial_mm}")
     if band is not None and nominal is None:
         raise ValueError("--tolerance-mm/--upper-mm/--lower-mm need --nominal")
     ok = valid_mask(cloud.points_mm, cloud.quality)
@@ -167,7 +174,7 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
     rows = []
     for i, s in enumerate(sections):
         us = scatter_u(s.scatter_mm, s.n_valid, s.points_per_bin)
-        rows.append(_section_dict(s, us, None if u_cal is None else u_cal[i]))
+        rows.append(_section_dict(s, us, None if u_cal is None else u_cal[i], u_radial_mm))
 
     inspection = Inspection(data={}, sections=sections, band=band)
     nom_out = None
@@ -178,7 +185,8 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
             dev = deviations(s.xy_mm, ring)
             inspection.deviations_mm.append((ring, dev))
             u_dev = combine(scatter_u(s.scatter_mm, 1, 1)["deviation_mm"],
-                            None if u_cal is None else u_cal[sections.index(s)]["d_ls_mm"] / 2)
+                            None if u_cal is None else u_cal[sections.index(s)]["d_ls_mm"] / 2,
+                            u_radial_mm or None)
             nd = {"deviation_min_mm": _q(dev.min(), u_dev["u"]),
                   "deviation_max_mm": _q(dev.max(), u_dev["u"]),
                   "deviation_rms_mm": float(np.sqrt(np.mean(dev**2)))}
@@ -208,7 +216,8 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         "settings": {"bin_deg": bin_deg, "gap_deg": gap_deg,
                      "lump_threshold_mm": lump_threshold_mm,
                      "reference_circles": list(REFERENCES),
-                     "calibration_uncertainty": cal_note},
+                     "calibration_uncertainty": cal_note,
+                     "u_radial_mm": u_radial_mm},
         "sections": rows, "scan": _scan(sections, rows, lump_threshold_mm),
         "nominal": nom_out, "truth": truth_out}
     return inspection
