@@ -33,7 +33,8 @@ def test_files_json_and_csv(report_dir):
     q = s["d_ls_mm"]
     assert set(q) == {"value", "u", "U_k2"} and q["U_k2"] == pytest.approx(2 * q["u"])
     assert "ovality_over_sum_pct" in s and "ovality_over_mean_pct" in s
-    assert s["gaps"] and s["gaps"][0]["flags"] == {"NO_PEAK": 40}  # 100.0° < θ < 104.0°, float steps
+    # 100.0° < θ < 104.0° in 0.1° float steps: 40 samples
+    assert s["gaps"] and s["gaps"][0]["flags"] == {"NO_PEAK": 40}
     assert data["nominal"]["pass"] is False  # ±0.04 mm: the ovality (±0.05 mm) breaks it
     rows = list(csv.DictReader(open(report_dir / "sections.csv")))
     assert len(rows) == 6 and "U_d_ls_mm" in rows[0] and "ront_mzci_mm" in rows[0]

@@ -336,7 +336,8 @@ def cmd_inspect(args) -> int:
     d = ins.data
     tr = d["scan"]["trends"]["d_ls_mm"]
     print(f"{d['n_sections']} section(s) inspected in {time.perf_counter() - t0:.2f} s; mean LS "
-          f"diameter {tr['mean']:.4f} mm; calibration u: {d['settings']['calibration_uncertainty']}")
+          f"diameter {tr['mean']:.4f} mm; calibration u: "
+          f"{d['settings']['calibration_uncertainty']}")
     for e in d["scan"]["events"]:
         print(f"  {e['kind']} at z = {e['z_extreme_mm']:.2f} mm ({e['length_mm']:.2f} mm long, "
               f"{1e3 * e['deviation_mm']:+.1f} µm)")

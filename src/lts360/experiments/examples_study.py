@@ -6,7 +6,8 @@ noise by default), measured by inverse triangulation and scored against its grou
 and quality), ``figures/<object>.png`` (the points coloured by view — red direct, blue and
 green mirrors, as in the paper — and one section against the truth), ``inspection/<object>/``
 (the ``lts360 inspect`` report against the object's analytic nominal, true values beside the
-measured ones) and a row of the error table.  One trial per object, so an interrupted study resumes object by object.
+measured ones) and a row of the error table.  One trial per object, so an interrupted study
+resumes object by object.
 
 The calibration is the rendered frames' true one by default (``--calibration`` to measure
 with an estimated one): the examples then show the algorithm and the optics, not the

@@ -119,7 +119,6 @@ def analyse_section(xy_mm, *, index: int = 0, z_mm: float = 0.0, theta_invalid_r
         prof = bin_profile(xy, least_squares_circle(prof.xy_mm).centre_mm, bin_deg=bin_deg)
     pxy = prof.xy_mm if len(prof.r_mm) >= MIN_POINTS else xy
     circles = reference_circles(pxy)
-    ls = circles["LSCI"]
     sigma, per_bin = _scatter(xy, prof)
     th_u, r_u = uniform_profile(prof, gap_deg=gap_deg)
     harm = (fit_harmonics(th_u, r_u) if np.all(np.isfinite(r_u))
