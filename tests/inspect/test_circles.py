@@ -86,3 +86,13 @@ def test_mcc_and_mic_of_a_circle_are_the_circle():
 def test_too_few_points_is_a_clear_error():
     with pytest.raises(ValueError, match="at least 3 finite points"):
         least_squares_circle(np.zeros((2, 2)))
+
+
+def test_the_filter_lowers_the_roundness_of_point_noise():
+    from lts360.inspect.section import analyse_section
+
+    rng = np.random.default_rng(2)
+    xy = polar(lambda t: 10.0 + 0.02 * np.cos(3 * t) + 0.01 * rng.normal(size=t.size))
+    raw = analyse_section(xy).circles["MZCI"].ront_mm
+    filt = analyse_section(xy, filter_upr=50).circles["MZCI"].ront_mm
+    assert filt < raw and filt == pytest.approx(0.04, abs=0.005)  # the 3 lobes survive

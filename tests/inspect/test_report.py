@@ -84,3 +84,20 @@ def test_a_single_section_report(tmp_path):
     assert "axis" not in ins.data["scan"]
     assert np.isfinite(ins.data["sections"][0]["ront_mm"]["MZCI"]["value"])
     assert (out / "report.html").stat().st_size > 10_000
+
+
+def test_a_section_seen_over_an_arc_only_is_reported_with_a_warning(tmp_path):
+    from lts360.recon.triangulation.cloud import Cloud
+
+    th = np.radians(np.arange(-60.0, 60.0, 0.1))
+    r = 10 + 0.05 * np.cos(2 * th)
+    n = th.size
+    cloud = Cloud(np.column_stack([r * np.cos(th), r * np.sin(th), np.zeros(n)]), th, r,
+                  np.zeros(n, np.uint8), np.zeros(n, np.uint8), np.zeros(n, np.int32),
+                  np.ones(n, np.float32))
+    ins = inspect_cloud(cloud)
+    s = ins.data["sections"][0]
+    assert s["coverage_deg"] == pytest.approx(120.0, abs=0.6)
+    assert s["warnings"] and "240°" in s["warnings"][0]
+    assert s["d_min_mm"]["value"] is None  # no direction has both ends measured
+    assert "Warnings" in (write_report(ins, tmp_path / "r") / "report.html").read_text()

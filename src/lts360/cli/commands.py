@@ -330,7 +330,7 @@ def cmd_inspect(args) -> int:
     t0 = time.perf_counter()
     ins = inspect_cloud(cloud, nominal=nominal, band=band, calibration=cal, truth=truth,
                         lump_threshold_mm=args.lump_mm, n_draws=args.draws, seed=args.seed,
-                        u_radial_mm=args.u_radial_mm,
+                        u_radial_mm=args.u_radial_mm, filter_upr=args.filter_upr,
                         source=str(args.cloud))
     write_report(ins, out)
     d = ins.data

@@ -140,6 +140,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--u-radial-mm", type=float, default=0.0,
                    help="type-B standard uncertainty of a radial offset common to a section "
                         "(the rig's error budget): 2u on diameters, u on deviations")
+    s.add_argument("--filter-upr", type=float, default=None,
+                   help="ISO 12181-2 Gaussian filter cut-off (undulations per revolution, e.g. "
+                        "50) before roundness and diameters (default: none)")
     s.add_argument("--draws", type=int, default=20, help="calibration Monte Carlo draws")
     s.add_argument("--seed", type=int, default=0)
     s.set_defaults(func=cmd_inspect)

@@ -50,9 +50,15 @@ class Harmonics:
     def orders(self) -> np.ndarray:
         return np.arange(1, len(self.amplitude_mm) + 1)
 
+    def amplitude(self, k: int) -> float:
+        """Aₖ (mm), NaN for an order that was not fitted."""
+        return float(self.amplitude_mm[k - 1]) if 1 <= k <= len(self.amplitude_mm) else np.nan
+
     def dominant(self, *, from_order: int = 2) -> tuple[int, float]:
         """``(k, Aₖ)`` of the largest amplitude from ``from_order`` up."""
         a = self.amplitude_mm[from_order - 1:]
+        if a.size == 0:
+            return from_order, float("nan")
         k = int(np.argmax(a)) + from_order
         return k, float(self.amplitude_mm[k - 1])
 
@@ -82,7 +88,10 @@ def fit_harmonics(theta_rad, r_mm, *, max_order: int = DEFAULT_MAX_ORDER) -> Har
         A = np.column_stack([np.ones_like(th), np.cos(kt), np.sin(kt)])
         N = np.einsum("ij,ik->jk", A, A)  # normal equations (small: BLAS threads cost more)
         N[np.diag_indices_from(N)] *= 1.0 + 1e-10
-        coef = cho_solve(cho_factor(N), np.einsum("ij,i->j", A, r))
+        try:
+            coef = cho_solve(cho_factor(N), np.einsum("ij,i->j", A, r))
+        except np.linalg.LinAlgError:  # a wide gap: the high orders are not determined
+            coef = np.linalg.lstsq(A, r, rcond=1e-10)[0]
         a0, a, b = float(coef[0]), coef[1:K + 1], coef[K + 1:]
         res = r - A @ coef
     dof = max(1, n - (2 * K + 1))

@@ -313,6 +313,9 @@ def _html(data: dict, figs: dict[str, bytes]) -> str:
     gaps = [[s["index"], f"{g['start_deg']:.1f}", f"{g['end_deg']:.1f}", f"{g['width_deg']:.1f}",
              html.escape(", ".join(f"{k}: {v}" for k, v in g["flags"].items()))]
             for s in data["sections"] for g in s["gaps"]]
+    warn = [f"<li>section {s['index']} (z = {s['z_mm']:.2f} mm): {html.escape(w)}</li>"
+            for s in data["sections"] for w in s.get("warnings", [])]
+    warn = f"<h2>Warnings</h2><ul>{''.join(warn)}</ul>" if warn else ""
     imgs = "".join(f'<figure><img alt="{html.escape(n)}" src="data:image/png;base64,'
                    f'{base64.b64encode(b).decode("ascii")}"><figcaption>{html.escape(n)}'
                    "</figcaption></figure>" for n, b in figs.items())
@@ -326,7 +329,7 @@ def _html(data: dict, figs: dict[str, bytes]) -> str:
             " ISO 12181 reference circles LSCI, MZCI, MCCI, MICI. Ovality Δ/Σ = (Dmax − Dmin)/"
             "(Dmax + Dmin), Δ/D̄ = (Dmax − Dmin)/D_mean.</p><h2>Scan</h2>"
             + _table(["quantity", "value"], summary) + "<h2>Lumps and neck-downs</h2>" + events
-            + "<h2>Sections</h2>" + _table(head, body) + "<h2>Gaps (no valid point)</h2>"
+            + "<h2>Sections</h2>" + _table(head, body) + warn + "<h2>Gaps (no valid point)</h2>"
             + (_table(["section", "from (°)", "to (°)", "width (°)", "flags"], gaps) if gaps
                else "<p>none</p>") + "<h2>Figures</h2>" + imgs + "</body></html>")
 

@@ -53,6 +53,7 @@ def _section_dict(s: SectionResult, us: dict, uc: dict | None, u_radial_mm: floa
            "gaps": [{"start_deg": x.start_deg, "end_deg": x.end_deg, "width_deg": x.width_deg,
                      "flags": x.flags} for x in s.gaps],
            "scatter_mm": s.scatter_mm, "points_per_bin": s.points_per_bin,
+           "warnings": s.extra.get("warnings", []),
            "centre_x_mm": _q(ls.centre_mm[0], us["centre_x_mm"], g("centre_x_mm")),
            "centre_y_mm": _q(ls.centre_mm[1], us["centre_y_mm"], g("centre_y_mm")),
            "d_ls_mm": _q(ls.diameter_mm, us["d_ls_mm"], g("d_ls_mm"), ub),
@@ -82,8 +83,8 @@ def _section_dict(s: SectionResult, us: dict, uc: dict | None, u_radial_mm: floa
     k_dom, a_dom = h.dominant()
     out["harmonics"] = {"amplitude_mm": h.amplitude_mm.tolist(), "phase_deg": h.phase_deg.tolist(),
                         "u_amplitude_mm": combine(us["harmonic_mm"])["u"],
-                        "a2_mm": _q(h.amplitude_mm[1], us["harmonic_mm"], g("a2_mm")),
-                        "a3_mm": _q(h.amplitude_mm[2], us["harmonic_mm"], g("a3_mm")),
+                        "a2_mm": _q(h.amplitude(2), us["harmonic_mm"], g("a2_mm")),
+                        "a3_mm": _q(h.amplitude(3), us["harmonic_mm"], g("a3_mm")),
                         "dominant_order": k_dom, "dominant_amplitude_mm": a_dom}
     return out
 
@@ -104,8 +105,8 @@ def _truth_rows(truth, sections: list[SectionResult]) -> tuple[dict, list]:
                      "d_mean_mm": t.diameters.d_mean_mm, "d_min_mm": t.diameters.d_min_mm,
                      "d_max_mm": t.diameters.d_max_mm, "ovality_mm": t.diameters.ovality_mm,
                      "ront_mm": {k: c.ront_mm for k, c in t.circles.items()},
-                     "a2_mm": float(t.harmonics.amplitude_mm[1]),
-                     "a3_mm": float(t.harmonics.amplitude_mm[2])})
+                     "a2_mm": t.harmonics.amplitude(2),
+                     "a3_mm": t.harmonics.amplitude(3)})
     return {"object": obj.spec, "analytic": obj.radius_fn is not None}, rows
 
 
@@ -114,7 +115,7 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
                   lump_threshold_mm: float = scan_mod.DEFAULT_LUMP_MM,
                   n_draws: int = DEFAULT_DRAWS, seed: int = 0, u_radial_mm: float = 0.0,
                   bin_deg: float = DEFAULT_BIN_DEG, gap_deg: float = DEFAULT_GAP_DEG,
-                  source: str = "") -> Inspection:
+                  filter_upr: float | None = None, source: str = "") -> Inspection:
     """Inspect every section of ``cloud``.
 
     Parameters
@@ -140,6 +141,8 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
     """
     if not (u_radial_mm >= 0 and np.isfinite(u_radial_mm)):
         raise ValueError(f"--u-radial-mm: must be >= 0, got {u_radial_mm}")
+    if filter_upr is not None and not (np.isfinite(filter_upr) and 1 <= filter_upr <= 1000):
+        raise ValueError(f"--filter-upr: must be in [1, 1000], got {filter_upr}")
     if band is not None and nominal is None:
         raise ValueError("--tolerance-mm/--upper-mm/--lower-mm need --nominal")
     ok = valid_mask(cloud.points_mm, cloud.quality)
@@ -159,7 +162,7 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         sections.append(analyse_section(
             cloud.points_mm[v, :2], index=int(k), z_mm=z, theta_valid_rad=cloud.theta_rad[v],
             theta_invalid_rad=cloud.theta_rad[inv], quality_invalid=cloud.quality[inv],
-            bin_deg=bin_deg, gap_deg=gap_deg))
+            bin_deg=bin_deg, gap_deg=gap_deg, filter_upr=filter_upr))
         xy_list.append(cloud.points_mm[v, :2])
         view_list.append(_VIEW_LOOKUP[cloud.view[v]])
     if not sections:
@@ -213,7 +216,7 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
     inspection.data = {
         "source": source, "n_sections": len(sections), "sections_skipped": skipped,
         "units": "lengths in mm, angles in deg; {value, u, U_k2}: U_k2 = 2u",
-        "settings": {"bin_deg": bin_deg, "gap_deg": gap_deg,
+        "settings": {"bin_deg": bin_deg, "gap_deg": gap_deg, "filter_upr": filter_upr,
                      "lump_threshold_mm": lump_threshold_mm,
                      "reference_circles": list(REFERENCES),
                      "calibration_uncertainty": cal_note,

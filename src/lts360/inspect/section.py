@@ -15,15 +15,18 @@ import numpy as np
 
 from lts360.inspect.circles import ReferenceCircle, least_squares_circle, reference_circles
 from lts360.inspect.diameters import Diameters, diameters
-from lts360.inspect.harmonics import Harmonics, fit_harmonics
+from lts360.inspect.harmonics import DEFAULT_MAX_ORDER, Harmonics, fit_harmonics
 from lts360.inspect.profile import (DEFAULT_BIN_DEG, DEFAULT_GAP_DEG, BinnedProfile, Gap,
-                                    bin_profile, coverage_deg, gaps, interp_profile,
+                                    bin_profile, coverage_deg, gaps, gaussian_filter,
+                                    interp_profile,
                                     uniform_profile)
 
 __all__ = ["SectionResult", "analyse_section", "MIN_POINTS"]
 
 #: Fewest valid points a section needs to be inspected (a circle and a few lobes).
 MIN_POINTS = 12
+#: A gap wider than this (deg) is named in the section's warnings.
+WIDE_GAP_DEG = 30.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -85,8 +88,8 @@ def _scatter(xy: np.ndarray, profile: BinnedProfile) -> tuple[float, float]:
 
 def analyse_section(xy_mm, *, index: int = 0, z_mm: float = 0.0, theta_invalid_rad=None,
                     quality_invalid=None, theta_valid_rad=None,
-                    bin_deg: float = DEFAULT_BIN_DEG,
-                    gap_deg: float = DEFAULT_GAP_DEG) -> SectionResult:
+                    bin_deg: float = DEFAULT_BIN_DEG, gap_deg: float = DEFAULT_GAP_DEG,
+                    filter_upr: float | None = None) -> SectionResult:
     """Inspect one section.
 
     Parameters
@@ -98,6 +101,10 @@ def analyse_section(xy_mm, *, index: int = 0, z_mm: float = 0.0, theta_invalid_r
         coverage and gaps are counted in these.
     theta_invalid_rad, quality_invalid : (m,) float, (m,) int, optional
         The section's invalid samples (named in the gaps).
+    filter_upr : float, optional
+        Pass the profile through the ISO 12181-2 Gaussian filter with this cut-off before the
+        reference circles and diameters (:func:`lts360.inspect.profile.gaussian_filter`); the
+        harmonics and the scatter stay those of the unfiltered profile.
 
     Raises
     ------
@@ -117,18 +124,30 @@ def analyse_section(xy_mm, *, index: int = 0, z_mm: float = 0.0, theta_invalid_r
     prof = bin_profile(xy, least_squares_circle(xy).centre_mm, bin_deg=bin_deg)
     if len(prof.r_mm) >= MIN_POINTS:
         prof = bin_profile(xy, least_squares_circle(prof.xy_mm).centre_mm, bin_deg=bin_deg)
+    raw = prof
+    if filter_upr is not None and len(prof.r_mm) >= MIN_POINTS:
+        prof = gaussian_filter(prof, filter_upr, gap_deg=gap_deg)
     pxy = prof.xy_mm if len(prof.r_mm) >= MIN_POINTS else xy
     circles = reference_circles(pxy)
-    sigma, per_bin = _scatter(xy, prof)
-    th_u, r_u = uniform_profile(prof, gap_deg=gap_deg)
-    harm = (fit_harmonics(th_u, r_u) if np.all(np.isfinite(r_u))
-            else fit_harmonics(prof.theta_rad, prof.r_mm))
+    sigma, per_bin = _scatter(xy, raw)
+    th_u, r_u = uniform_profile(raw, gap_deg=gap_deg)
+    gap_list = gaps(th_meas, theta_invalid_rad=theta_invalid_rad,
+                    quality_invalid=quality_invalid, gap_deg=gap_deg)
+    widest = max((g.width_deg for g in gap_list), default=0.0)
+    # a gap wider than half a period leaves that order undetermined: fit fewer orders
+    k_max = DEFAULT_MAX_ORDER if widest == 0 else int(np.clip(180.0 / widest, 2,
+                                                              DEFAULT_MAX_ORDER))
+    harm = (fit_harmonics(th_u, r_u, max_order=k_max) if np.all(np.isfinite(r_u))
+            else fit_harmonics(raw.theta_rad, raw.r_mm, max_order=k_max))
+    warnings = []
+    if widest > WIDE_GAP_DEG:
+        warnings.append(f"a gap of {widest:.0f}°: the MCCI, MICI, two-point diameters across it "
+                        f"and harmonics above order {k_max} are not determined by the points")
     n_inv = 0 if quality_invalid is None else len(quality_invalid)
     return SectionResult(
         index=int(index), z_mm=float(z_mm), n_valid=len(xy), n_samples=len(xy) + n_inv,
         coverage_deg=coverage_deg(th_meas, gap_deg=gap_deg),
-        gaps=gaps(th_meas, theta_invalid_rad=theta_invalid_rad, quality_invalid=quality_invalid,
-                  gap_deg=gap_deg),
+        gaps=gap_list,
         circles=circles, diameters=diameters(prof, gap_deg=gap_deg),
         harmonics=harm, scatter_mm=sigma,
-        points_per_bin=per_bin, profile=prof, xy_mm=xy)
+        points_per_bin=per_bin, profile=prof, xy_mm=xy, extra={"warnings": warnings})

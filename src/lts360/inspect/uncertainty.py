@@ -124,7 +124,7 @@ def _quantities(xy: np.ndarray) -> dict[str, float]:
     return {"centre_x_mm": ls.centre_mm[0], "centre_y_mm": ls.centre_mm[1],
             "d_ls_mm": ls.diameter_mm, "d_mean_mm": dia.d_mean_mm, "d_min_mm": dia.d_min_mm,
             "d_max_mm": dia.d_max_mm, "ovality_mm": dia.ovality_mm,
-            "ront_lsci_mm": ls.ront_mm, "a2_mm": h.amplitude_mm[1], "a3_mm": h.amplitude_mm[2]}
+            "ront_lsci_mm": ls.ront_mm, "a2_mm": h.amplitude(2), "a3_mm": h.amplitude(3)}
 
 
 def calibration_u(sections_xy, sections_views, cal, *, n_draws: int = DEFAULT_DRAWS,
