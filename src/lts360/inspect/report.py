@@ -160,14 +160,14 @@ def _fig_along_z(ins: Inspection) -> bytes:
         ax1.errorbar(z, v, yerr=[r[key]["U_k2"] for r in rows], fmt=".-", ms=3, lw=0.8,
                      color=col, label=lab, capsize=2)
         if all(r.get("truth") for r in rows):
-            ax1.plot(z, [r["truth"][key] for r in rows], ":", color=col, lw=1,
+            ax1.plot(z, [r["truth"][key] for r in rows], "x:", color=col, lw=1, ms=4,
                      label=lab + " true")
     ov = np.array([np.nan if r["ovality_mm"]["value"] is None else r["ovality_mm"]["value"]
                    for r in rows])
     ax2.errorbar(z, 1e3 * ov, yerr=[1e3 * r["ovality_mm"]["U_k2"] for r in rows], fmt=".-",
                  ms=3, color="k", capsize=2, label="ovality Dmax − Dmin")
     if all(r.get("truth") for r in rows):
-        ax2.plot(z, [1e3 * r["truth"]["ovality_mm"] for r in rows], ":", color="k",
+        ax2.plot(z, [1e3 * r["truth"]["ovality_mm"] for r in rows], "x:", color="k", ms=4,
                  label="true")
     for e in ins.data["scan"]["events"]:
         for ax in (ax1, ax2):
