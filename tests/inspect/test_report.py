@@ -103,3 +103,8 @@ def test_a_section_seen_over_an_arc_only_is_reported_with_a_warning():
     from lts360.inspect.report import _html
 
     assert "<h2>Warnings</h2>" in _html(ins.data, {})
+
+
+def test_the_json_is_strict(report_dir):
+    text = (report_dir / "inspection.json").read_text()
+    json.loads(text, parse_constant=lambda c: pytest.fail(f"{c} in inspection.json"))

@@ -345,7 +345,8 @@ def write_report(ins: Inspection, out) -> Path:
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir()
     try:
-        (tmp / "inspection.json").write_text(json.dumps(ins.data, indent=1, default=_jsonable))
+        (tmp / "inspection.json").write_text(json.dumps(_finite(ins.data), indent=1,
+                                                        default=_jsonable, allow_nan=False))
         rows = csv_rows(ins.data)
         cols = list(dict.fromkeys(k for r in rows for k in r))
         with open(tmp / "sections.csv", "w", newline="") as f:
@@ -365,6 +366,19 @@ def write_report(ins: Inspection, out) -> Path:
         shutil.rmtree(out)
     tmp.replace(out)
     return out
+
+
+def _finite(value):
+    """The data with every NaN or infinity as null (strict JSON)."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _finite(value.tolist())
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    return value
 
 
 def _jsonable(value):
