@@ -190,6 +190,10 @@ def test_examples_and_algorithms_studies_end_to_end(tmp_path):
     assert ex["alu-pipe"]["sections"] == 1 and ex["alu-pipe"]["coverage_deg"] > 340.0
     assert ex["alu-pipe"]["rms_mm"] < 0.1
     assert (tmp_path / "ex" / "clouds" / "alu-pipe.ply").is_file()
+    report = json.loads((tmp_path / "ex" / "inspection" / "alu-pipe" / "inspection.json")
+                        .read_text())
+    # the true section's 3 lobes of 30 µm (0.5° bins take 3e-5 of them off: 0.9 nm)
+    assert report["sections"][0]["truth"]["a3_mm"] == pytest.approx(0.03, abs=5e-6)
     al = run_algorithms_study(tmp_path / "al", objects=["plug-gauge"], noises=("none",),
                               repeats=1, theta_step_deg=0.5, say=lambda *_: None)
     rows = al["plug-gauge"]["none"]

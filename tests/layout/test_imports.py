@@ -98,7 +98,7 @@ def _imports_of(prefix: str) -> set[str]:
 def test_recon_reads_images_and_calibrations_only():
     """recon runs on real images: it never imports the simulator, the scenes or a study."""
     bad = {t for t in _imports_of("lts360.recon")
-           if t.split(".")[1] in ("simulator", "scenes", "experiments", "cli")}
+           if t.split(".")[1] in ("simulator", "scenes", "experiments", "cli", "inspect")}
     assert bad == set()
 
 
@@ -112,5 +112,16 @@ def test_triangulation_does_not_import_the_calibration_procedures():
 def test_geometry_and_scenes_do_not_import_the_layers_above():
     for layer in ("lts360.geometry", "lts360.scenes"):
         bad = {t for t in _imports_of(layer)
-               if t.split(".")[1] in ("simulator", "recon", "experiments", "cli")}
+               if t.split(".")[1] in ("simulator", "recon", "experiments", "cli", "inspect")}
         assert bad == set(), layer
+
+
+def test_inspect_reads_clouds_and_nominals_never_the_simulator():
+    """inspect works on measured clouds: recon, geometry and scenes (nominal contours, the truth
+    of rendered frames) below it; never the simulator, a study or the command line."""
+    bad = {t for t in _imports_of("lts360.inspect")
+           if t.split(".")[1] in ("simulator", "experiments", "cli", "design")}
+    assert bad == set()
+    below = {t for layer in ("lts360.geometry", "lts360.scenes", "lts360.recon")
+             for t in _imports_of(layer) if t.startswith("lts360.inspect")}
+    assert below == set()

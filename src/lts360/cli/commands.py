@@ -1,4 +1,5 @@
-"""The single-job commands: objects, object, rig, render, measure, compensate, score, calibrate."""
+"""The single-job commands: objects, object, rig, render, measure, compensate, score, calibrate,
+inspect."""
 
 from __future__ import annotations
 
@@ -329,4 +330,68 @@ def cmd_calibrate(args) -> int:
                            camera_model_rounds=args.camera_model)
     print(format_report(report))
     print(f"wrote {out}/calibration.json, report.json, fig8.png")
+    return 0
+
+
+def cmd_inspect(args) -> int:
+    """``lts360 inspect``: every input is checked before anything is written."""
+    from lts360.inspect.nominal import ToleranceBand, load_nominal
+    from lts360.inspect.report import write_report
+    from lts360.inspect.run import inspect_cloud
+    from lts360.recon.triangulation.cloud import read_cloud
+
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out: {str(out)!r} exists and is not a directory")
+    if not out.parent.exists():
+        raise UsageError(f"--out: directory {str(out.parent)!r} does not exist")
+    if args.tolerance_mm is not None and (args.upper_mm is not None or args.lower_mm is not None):
+        raise UsageError("--tolerance-mm: give either it or --upper-mm/--lower-mm, not both")
+    if (args.upper_mm is None) != (args.lower_mm is None):
+        raise UsageError("--upper-mm/--lower-mm: give both limits")
+    if not args.lump_mm > 0:
+        raise UsageError(f"--lump-mm: must be > 0, got {args.lump_mm}")
+    if not (args.u_radial_mm >= 0 and np.isfinite(args.u_radial_mm)):
+        raise UsageError(f"--u-radial-mm: must be >= 0, got {args.u_radial_mm}")
+    if not 2 <= args.draws <= 10000:
+        raise UsageError(f"--draws: must be in [2, 10000], got {args.draws}")
+    band = None
+    if args.tolerance_mm is not None:
+        band = ToleranceBand.symmetric(args.tolerance_mm)
+    elif args.upper_mm is not None:
+        band = ToleranceBand(args.upper_mm, args.lower_mm)
+    if band is not None and args.nominal is None:
+        raise UsageError("--tolerance-mm/--upper-mm/--lower-mm: need --nominal")
+    cloud = read_cloud(args.cloud)
+    nominal = None if args.nominal is None else load_nominal(args.nominal)
+    cal = None
+    if args.calibration is not None:
+        from lts360.recon.calibration.model import load_calibration
+
+        cal = load_calibration(args.calibration)
+    truth = None
+    if args.truth is not None:
+        from lts360.inspect.truth import load_truth
+
+        truth = load_truth(args.truth)
+    t0 = time.perf_counter()
+    ins = inspect_cloud(cloud, nominal=nominal, band=band, calibration=cal, truth=truth,
+                        lump_threshold_mm=args.lump_mm, n_draws=args.draws, seed=args.seed,
+                        u_radial_mm=args.u_radial_mm, filter_upr=args.filter_upr,
+                        source=str(args.cloud))
+    write_report(ins, out)
+    d = ins.data
+    tr = d["scan"]["trends"]["d_ls_mm"]
+    print(f"{d['n_sections']} section(s) inspected in {time.perf_counter() - t0:.2f} s; mean LS "
+          f"diameter {tr['mean']:.4f} mm; calibration u: "
+          f"{d['settings']['calibration_uncertainty']}")
+    for e in d["scan"]["events"]:
+        print(f"  {e['kind']} at z = {e['z_extreme_mm']:.2f} mm ({e['length_mm']:.2f} mm long, "
+              f"{1e3 * e['deviation_mm']:+.1f} µm)")
+    if d["nominal"] and "pass" in d["nominal"]:
+        print(f"  against {d['nominal']['source']}: {'PASS' if d['nominal']['pass'] else 'FAIL'}")
+    if d["sections_skipped"]:
+        print(f"lts360: inspect: {len(d['sections_skipped'])} section(s) with too few valid "
+              f"points left out", file=sys.stderr)
+    print(f"wrote {out}/report.html, inspection.json, sections.csv, figures")
     return 0

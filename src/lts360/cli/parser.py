@@ -8,6 +8,7 @@ from lts360 import __version__
 from lts360.cli.commands import (
     cmd_calibrate,
     cmd_compensate,
+    cmd_inspect,
     cmd_measure,
     cmd_object,
     cmd_objects,
@@ -126,6 +127,33 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--truth", required=True, help="frame or scan directory written by `lts360 render`")
     s.add_argument("--out", required=True, help="metrics.json")
     s.set_defaults(func=cmd_score)
+
+    s = sub.add_parser("inspect", help="profile-gauge report of a measured cloud: diameters, "
+                       "ovality, roundness (ISO 12181), nominal deviation, trends, with U(k=2)")
+    s.add_argument("cloud", help="cloud.ply written by `lts360 measure`")
+    s.add_argument("--out", required=True, help="output directory (report.html, "
+                   "inspection.json, sections.csv, figures), replaced as a whole")
+    s.add_argument("--nominal", default=None, help="object SPEC (its analytic contour), "
+                   "CONTOUR.csv (x_mm,y_mm rows, closed) or DRAWING.dxf")
+    s.add_argument("--tolerance-mm", type=float, default=None,
+                   help="profile tolerance zone width (ISO 1101): ± half of it about the nominal")
+    s.add_argument("--upper-mm", type=float, default=None, help="upper deviation limit")
+    s.add_argument("--lower-mm", type=float, default=None, help="lower deviation limit")
+    s.add_argument("--calibration", default=None, help="the calibration.json the cloud was "
+                   "measured with: its covariance gives the calibration uncertainty")
+    s.add_argument("--truth", default=None, help="rendered frame or scan directory: true "
+                   "values beside the measured ones")
+    s.add_argument("--lump-mm", type=float, default=0.05,
+                   help="lump / neck-down threshold on Dmax / Dmin (default 0.05)")
+    s.add_argument("--u-radial-mm", type=float, default=0.0,
+                   help="type-B standard uncertainty of a radial offset common to a section "
+                        "(the rig's error budget): 2u on diameters, u on deviations")
+    s.add_argument("--filter-upr", type=float, default=None,
+                   help="ISO 12181-2 Gaussian filter cut-off (undulations per revolution, e.g. "
+                        "50) before roundness and diameters (default: none)")
+    s.add_argument("--draws", type=int, default=20, help="calibration Monte Carlo draws")
+    s.add_argument("--seed", type=int, default=0)
+    s.set_defaults(func=cmd_inspect)
 
     s = sub.add_parser("calibrate", help="calibrate camera, mirrors and laser plane from "
                        "chessboard images (rendered, or yours with --images)")

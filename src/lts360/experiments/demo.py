@@ -55,6 +55,7 @@ def _measure_frames(root: Path, obj, echo) -> dict:
         m = score_cloud(cloud, obj, rig_truth=json.loads((d / "frame.json").read_text()))
         m["measure_seconds"] = dt
         write_json(d / "metrics.json", m)
+        _inspect_gauge(d, cloud, obj, cal)
         views = [m["views"].get(v, {}).get("rms_mm") for v in ("direct", "left", "right")]
         cells = " ".join(f"{v * 1e3:6.1f}µm" if v is not None else f"{'—':>8s}" for v in views)
         echo(f"  {name:24s} {m['n_points']:7d} {m['coverage_deg']:8.1f}° "
@@ -63,6 +64,18 @@ def _measure_frames(root: Path, obj, echo) -> dict:
                                           "fitted_diameter_mm", "measure_seconds")}
     echo("  (rms per point; the radius bias is that of a circle fitted to all points)")
     return out
+
+
+def _inspect_gauge(d: Path, cloud, obj, cal) -> None:
+    """``inspection/``: the ``lts360 inspect`` report of a demo frame against the gauge's
+    nominal, with the true values."""
+    from lts360.inspect.nominal import nominal_from_spec
+    from lts360.inspect.report import write_report
+    from lts360.inspect.run import inspect_cloud
+
+    ins = inspect_cloud(cloud, nominal=nominal_from_spec(obj.spec), calibration=cal,
+                        truth=(obj, [0.0]), source=f"frames/{d.name}/cloud.ply")
+    write_report(ins, d / "inspection")
 
 
 def run_demo(out: Path, *, radius_mm: float = 10.0, rig_name: str = "paper", render: bool = True,

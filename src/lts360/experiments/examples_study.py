@@ -4,8 +4,10 @@ Each of the eight objects is scanned with the paper's number of sections and pit
 noise by default), measured by inverse triangulation and scored against its ground truth
 (analytic r(θ, z) and the mesh).  Per object: ``clouds/<object>.ply`` (points with their view
 and quality), ``figures/<object>.png`` (the points coloured by view — red direct, blue and
-green mirrors, as in the paper — and one section against the truth), and a row of the error
-table.  One trial per object, so an interrupted study resumes object by object.
+green mirrors, as in the paper — and one section against the truth), ``inspection/<object>/``
+(the ``lts360 inspect`` report against the object's analytic nominal, true values beside the
+measured ones) and a row of the error table.  One trial per object, so an interrupted study
+resumes object by object.
 
 The calibration is the rendered frames' true one by default (``--calibration`` to measure
 with an estimated one): the examples then show the algorithm and the optics, not the
@@ -98,6 +100,7 @@ def examples_trial(trial: Trial) -> TrialOutput:
     write_cloud(out / "clouds" / f"{obj.name}.ply", cloud)
     m = score_cloud(cloud, obj, rig_truth=rig_truth)
     _figure(obj, cloud, zs, out / "figures" / f"{obj.name}.png", m)
+    _inspection(obj, cloud, zs, cal, out / "inspection" / obj.name)
     views = ("direct", "left", "right")
     vals = {"n_points": m["n_points"], "coverage_deg": m["coverage_deg"],
             "rms_mm": m["rms_mm"], "mean_mm": m["mean_mm"], "p95_mm": m["p95_mm"],
@@ -112,6 +115,28 @@ def examples_trial(trial: Trial) -> TrialOutput:
     vals = {k: (np.nan if v is None else v) for k, v in vals.items()}
     return TrialOutput(values=vals, dims={"view_rms_mm": ("view",), "view_coverage_deg": ("view",)},
                        coords={"view": np.array(views)})
+
+
+def _inspection(obj, cloud, zs, cal, out: Path) -> None:
+    """The object's inspection report (``lts360 inspect``) against its analytic nominal, with
+    the true values beside the measured ones; an object the inspection cannot read (no
+    analytic contour, too few points) gets a one-line ``inspection.txt`` saying why."""
+    from lts360.inspect.nominal import nominal_from_spec
+    from lts360.inspect.report import write_report
+    from lts360.inspect.run import inspect_cloud
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        try:
+            nominal = nominal_from_spec(obj.spec)
+            nominal.contour(float(zs[0]))
+        except ValueError:
+            nominal = None
+        ins = inspect_cloud(cloud, nominal=nominal, calibration=cal, truth=(obj, list(zs)),
+                            source=f"clouds/{obj.name}.ply")
+        write_report(ins, out)
+    except ValueError as exc:
+        (out.parent / f"{obj.name}.txt").write_text(f"{obj.name}: no inspection: {exc}\n")
 
 
 def _figure(obj, cloud, zs, path: Path, metrics: dict) -> None:

@@ -1,0 +1,250 @@
+"""Inspect a measured cloud: every section, the scan, the nominal, the uncertainties and the
+truth, gathered into one JSON-ready result (units in the names; a quantity with uncertainty is
+``{"value", "u", "U_k2"}``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lts360.inspect import scan as scan_mod
+from lts360.inspect.circles import REFERENCES
+from lts360.inspect.nominal import Nominal, ToleranceBand, deviations, place_nominal
+from lts360.inspect.profile import DEFAULT_BIN_DEG, DEFAULT_GAP_DEG, valid_mask
+from lts360.inspect.section import MIN_POINTS, SectionResult, analyse_section
+from lts360.inspect.uncertainty import DEFAULT_DRAWS, calibration_u, combine, scatter_u
+from lts360.recon.triangulation.cloud import VIEW_NAMES, Cloud
+
+__all__ = ["Inspection", "inspect_cloud", "NoValidPoints"]
+
+
+_VIEW_LOOKUP = np.array([VIEW_NAMES.get(c, "?") for c in range(256)], dtype=object)
+
+
+class NoValidPoints(ValueError):
+    """The cloud holds no section with enough valid points."""
+
+
+@dataclass
+class Inspection:
+    """The result: ``data`` (JSON-ready) and what the figures need."""
+
+    data: dict
+    sections: list[SectionResult]
+    deviations_mm: list = field(default_factory=list)  # per section (n_i,) or None
+    reference_radius_mm: list = field(default_factory=list)
+    band: ToleranceBand | None = None
+
+
+def _q(value, *u_parts) -> dict:
+    v = None if value is None or not np.isfinite(value) else float(value)
+    return {"value": v, **combine(*u_parts)}
+
+
+def _section_dict(s: SectionResult, us: dict, uc: dict | None, u_radial_mm: float) -> dict:
+    g = (uc or {}).get
+    ub = 2.0 * u_radial_mm if u_radial_mm else None  # a common radial offset: 2u on sizes
+    d = s.diameters
+    ls = s.ls
+    out = {"index": s.index, "z_mm": s.z_mm, "n_valid": s.n_valid, "n_samples": s.n_samples,
+           "coverage_deg": s.coverage_deg,
+           "gaps": [{"start_deg": x.start_deg, "end_deg": x.end_deg, "width_deg": x.width_deg,
+                     "flags": x.flags} for x in s.gaps],
+           "scatter_mm": s.scatter_mm, "points_per_bin": s.points_per_bin,
+           "warnings": s.extra.get("warnings", []),
+           "centre_x_mm": _q(ls.centre_mm[0], us["centre_x_mm"], g("centre_x_mm")),
+           "centre_y_mm": _q(ls.centre_mm[1], us["centre_y_mm"], g("centre_y_mm")),
+           "d_ls_mm": _q(ls.diameter_mm, us["d_ls_mm"], g("d_ls_mm"), ub),
+           "d_mean_mm": _q(d.d_mean_mm, us["d_mean_mm"], g("d_mean_mm"), ub),
+           "d_min_mm": _q(d.d_min_mm, us["d_min_mm"], g("d_min_mm"), ub),
+           "d_max_mm": _q(d.d_max_mm, us["d_max_mm"], g("d_max_mm"), ub),
+           "phi_d_min_deg": d.phi_d_min_deg, "phi_d_max_deg": d.phi_d_max_deg,
+           "n_directions_measured": d.n_directions_measured,
+           "ovality_mm": _q(d.ovality_mm, us["ovality_mm"], g("ovality_mm")),
+           "calliper_min_mm": _q(d.calliper_min_mm, us["calliper_mm"], g("d_min_mm"), ub),
+           "calliper_max_mm": _q(d.calliper_max_mm, us["calliper_mm"], g("d_max_mm"), ub)}
+    uo = out["ovality_mm"]["u"]
+    if np.isfinite(d.ovality_mm):
+        out["ovality_over_sum_pct"] = _q(d.ovality_over_sum_pct,
+                                         100 * uo / (d.d_max_mm + d.d_min_mm))
+        out["ovality_over_mean_pct"] = _q(d.ovality_over_mean_pct, 100 * uo / d.d_mean_mm)
+    else:
+        out["ovality_over_sum_pct"] = out["ovality_over_mean_pct"] = _q(None)
+    out["ront_mm"] = {name: _q(c.ront_mm, us["ront_mm"], g("ront_lsci_mm"))
+                      for name, c in s.circles.items()}
+    out["reference_circles"] = {
+        name: {"centre_x_mm": float(c.centre_mm[0]), "centre_y_mm": float(c.centre_mm[1]),
+               "diameter_mm": _q(c.diameter_mm, us["d_ls_mm"] if name == "LSCI"
+                                 else us["size_ref_mm"], g("d_ls_mm"), ub)}
+        for name, c in s.circles.items()}
+    h = s.harmonics
+    k_dom, a_dom = h.dominant()
+    out["harmonics"] = {"amplitude_mm": h.amplitude_mm.tolist(), "phase_deg": h.phase_deg.tolist(),
+                        "u_amplitude_mm": combine(us["harmonic_mm"])["u"],
+                        "a2_mm": _q(h.amplitude(2), us["harmonic_mm"], g("a2_mm")),
+                        "a3_mm": _q(h.amplitude(3), us["harmonic_mm"], g("a3_mm")),
+                        "dominant_order": k_dom, "dominant_amplitude_mm": a_dom}
+    return out
+
+
+def _truth_rows(truth, sections: list[SectionResult]) -> tuple[dict, list]:
+    from lts360.inspect.truth import load_truth, true_section_xy
+
+    obj, _ = truth if isinstance(truth, tuple) else load_truth(truth)
+    rows = []
+    for s in sections:
+        xy = true_section_xy(obj, s.z_mm)
+        if xy is None or len(xy) < MIN_POINTS:
+            rows.append(None)
+            continue
+        t = analyse_section(xy, index=s.index, z_mm=s.z_mm)
+        rows.append({"centre_x_mm": float(t.ls.centre_mm[0]),
+                     "centre_y_mm": float(t.ls.centre_mm[1]), "d_ls_mm": t.ls.diameter_mm,
+                     "d_mean_mm": t.diameters.d_mean_mm, "d_min_mm": t.diameters.d_min_mm,
+                     "d_max_mm": t.diameters.d_max_mm, "ovality_mm": t.diameters.ovality_mm,
+                     "ront_mm": {k: c.ront_mm for k, c in t.circles.items()},
+                     "a2_mm": t.harmonics.amplitude(2),
+                     "a3_mm": t.harmonics.amplitude(3)})
+    return {"object": obj.spec, "analytic": obj.radius_fn is not None}, rows
+
+
+def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
+                  band: ToleranceBand | None = None, calibration=None, truth=None,
+                  lump_threshold_mm: float = scan_mod.DEFAULT_LUMP_MM,
+                  n_draws: int = DEFAULT_DRAWS, seed: int = 0, u_radial_mm: float = 0.0,
+                  bin_deg: float = DEFAULT_BIN_DEG, gap_deg: float = DEFAULT_GAP_DEG,
+                  filter_upr: float | None = None, source: str = "") -> Inspection:
+    """Inspect every section of ``cloud``.
+
+    Parameters
+    ----------
+    cloud : Cloud
+        As ``lts360 measure`` writes it; z of a section is its stage position.
+    nominal : Nominal, optional
+    band : ToleranceBand, optional
+        Needs ``nominal``.
+    calibration : Calibration, optional
+        The one the cloud was measured with; its covariance gives the calibration u.
+    truth : path or (SceneObject, z list), optional
+        A rendered frame or scan: true values beside the measured ones.
+    u_radial_mm : float, >= 0
+        Type-B standard uncertainty of a radial offset common to a section (the rig's error
+        budget or a reference measurement's bias): 2u on every diameter, u on a deviation,
+        nothing on centre, ovality, roundness or harmonics, where it cancels.
+
+    Raises
+    ------
+    NoValidPoints
+        No section has :data:`MIN_POINTS` valid points.
+    """
+    if not (u_radial_mm >= 0 and np.isfinite(u_radial_mm)):
+        raise ValueError(f"--u-radial-mm: must be >= 0, got {u_radial_mm}")
+    if filter_upr is not None and not (np.isfinite(filter_upr) and 1 <= filter_upr <= 1000):
+        raise ValueError(f"--filter-upr: must be in [1, 1000], got {filter_upr}")
+    if band is not None and nominal is None:
+        raise ValueError("--tolerance-mm/--upper-mm/--lower-mm need --nominal")
+    ok = valid_mask(cloud.points_mm, cloud.quality)
+    if not ok.any():
+        raise NoValidPoints(f"the cloud {source or ''} has no valid point ({len(cloud)} samples, "
+                            "none finite with quality FOUND or SATURATED)".replace("  ", " "))
+    sections, skipped, xy_list, view_list = [], [], [], []
+    for k in np.unique(cloud.section):
+        m = cloud.section == k
+        v = m & ok
+        z = float(np.median(cloud.points_mm[m, 2][np.isfinite(cloud.points_mm[m, 2])])) \
+            if np.isfinite(cloud.points_mm[m, 2]).any() else float("nan")
+        if v.sum() < MIN_POINTS:
+            skipped.append({"index": int(k), "z_mm": z, "n_valid": int(v.sum())})
+            continue
+        inv = m & ~ok
+        sections.append(analyse_section(
+            cloud.points_mm[v, :2], index=int(k), z_mm=z, theta_valid_rad=cloud.theta_rad[v],
+            theta_invalid_rad=cloud.theta_rad[inv], quality_invalid=cloud.quality[inv],
+            bin_deg=bin_deg, gap_deg=gap_deg, filter_upr=filter_upr))
+        xy_list.append(cloud.points_mm[v, :2])
+        view_list.append(_VIEW_LOOKUP[cloud.view[v]])
+    if not sections:
+        raise NoValidPoints(f"no section has {MIN_POINTS} valid points: "
+                            + ", ".join(f"section {s['index']}: {s['n_valid']}" for s in skipped))
+    cal_note = "not given"
+    u_cal = None
+    if calibration is not None:
+        u_cal = calibration_u(xy_list, view_list, calibration, n_draws=n_draws, seed=seed)
+        cal_note = (f"Monte Carlo over {n_draws} calibration draws (seed {seed})"
+                    if u_cal is not None else "the calibration carries no covariance: 0")
+    rows = []
+    for i, s in enumerate(sections):
+        us = scatter_u(s.scatter_mm, s.n_valid, s.points_per_bin)
+        rows.append(_section_dict(s, us, None if u_cal is None else u_cal[i], u_radial_mm))
+
+    inspection = Inspection(data={}, sections=sections, band=band)
+    nom_out = None
+    if nominal is not None:
+        all_pass = True
+        for s, row in zip(sections, rows):
+            ring = place_nominal(nominal.contour(s.z_mm), s.ls.centre_mm)
+            dev = deviations(s.xy_mm, ring)
+            inspection.deviations_mm.append((ring, dev))
+            u_dev = combine(scatter_u(s.scatter_mm, 1, 1)["deviation_mm"],
+                            None if u_cal is None else u_cal[sections.index(s)]["d_ls_mm"] / 2,
+                            u_radial_mm or None)
+            nd = {"deviation_min_mm": _q(dev.min(), u_dev["u"]),
+                  "deviation_max_mm": _q(dev.max(), u_dev["u"]),
+                  "deviation_rms_mm": float(np.sqrt(np.mean(dev**2)))}
+            if band is not None:
+                outside = (dev > band.upper_mm) | (dev < band.lower_mm)
+                U = u_dev["U_k2"]
+                sure_in = (dev.max() <= band.upper_mm - U) and (dev.min() >= band.lower_mm + U)
+                sure_out = (dev.max() > band.upper_mm + U) or (dev.min() < band.lower_mm - U)
+                nd.update({"n_outside": int(outside.sum()), "pass": bool(not outside.any()),
+                           "conformance_iso14253": "conforms" if sure_in else
+                           ("does not conform" if sure_out else "inconclusive")})
+                all_pass &= nd["pass"]
+            row["nominal"] = nd
+        nom_out = {"source": nominal.source, "alignment": "LS centre onto LS centre",
+                   "round": nominal.is_round}
+        if band is not None:
+            nom_out.update({"upper_mm": band.upper_mm, "lower_mm": band.lower_mm,
+                            "pass": bool(all_pass)})
+    truth_out = None
+    if truth is not None:
+        truth_out, trows = _truth_rows(truth, sections)
+        for row, t in zip(rows, trows):
+            row["truth"] = t
+    inspection.data = {
+        "source": source, "n_sections": len(sections), "sections_skipped": skipped,
+        "units": "lengths in mm, angles in deg; {value, u, U_k2}: U_k2 = 2u",
+        "settings": {"bin_deg": bin_deg, "gap_deg": gap_deg, "filter_upr": filter_upr,
+                     "lump_threshold_mm": lump_threshold_mm,
+                     "reference_circles": list(REFERENCES),
+                     "calibration_uncertainty": cal_note,
+                     "u_radial_mm": u_radial_mm},
+        "sections": rows, "scan": _scan(sections, rows, lump_threshold_mm),
+        "nominal": nom_out, "truth": truth_out}
+    return inspection
+
+
+def _scan(sections: list[SectionResult], rows: list[dict], lump_mm: float) -> dict:
+    z = np.array([s.z_mm for s in sections])
+    val = lambda key: np.array([r[key]["value"] if r[key]["value"] is not None else np.nan  # noqa: E731
+                                for r in rows], dtype=float)
+    out = {"n_sections": len(sections),
+           "z_range_mm": [float(z.min()), float(z.max())],
+           "trends": {k: scan_mod.trend(z, val(k)) for k in
+                      ("d_ls_mm", "d_min_mm", "d_max_mm", "ovality_mm", "centre_x_mm",
+                       "centre_y_mm")},
+           "events": [e.__dict__ for e in scan_mod.lumps_and_necks(
+               z, val("d_min_mm"), val("d_max_mm"), threshold_mm=lump_mm,
+               indices=[s.index for s in sections])]}
+    if len(sections) >= 2 and np.ptp(z) > 0:
+        ax = scan_mod.fit_axis(z, [s.ls.centre_mm for s in sections])
+        out["axis"] = {"x0_mm": ax.x0_mm, "y0_mm": ax.y0_mm, "slope_x": ax.slope_x,
+                       "slope_y": ax.slope_y, "tilt_deg": ax.tilt_deg,
+                       "tilt_azimuth_deg": ax.tilt_azimuth_deg,
+                       "straightness_mm": ax.straightness_mm}
+        out["cylindricity"] = scan_mod.cylindricity(z, [s.profile.xy_mm for s in sections],
+                                                    start=ax)
+        out["diameter_spectrum"] = scan_mod.diameter_spectrum(z, val("d_ls_mm"))
+    return out

@@ -1,0 +1,76 @@
+"""``lts360 inspect``: a report from a cloud file, and bad input as one line, exit 2, nothing
+written."""
+
+import json
+
+import numpy as np
+import pytest
+
+from lts360.cli import main
+from lts360.recon.triangulation.cloud import Cloud, write_cloud
+
+from _profiles import scan_cloud
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("in")
+    c = scan_cloud(n_sections=3)
+    write_cloud(d / "scan.ply", c)
+    bad = Cloud(np.full_like(c.points_mm, np.nan), c.theta_rad, c.radius_mm, c.view,
+                np.ones_like(c.quality), c.section, c.intensity)
+    write_cloud(d / "empty.ply", bad)
+    (d / "open.csv").write_text("x_mm,y_mm\n10,0\n0,10\n-10,0\n0,-10\n")
+    (d / "units.csv").write_text("x_furlong,y_furlong\n10,0\n0,10\n-10,0\n10,0\n")
+    (d / "values.csv").write_text("x_mm,y_mm\n10,0\n0,ten\n-10,0\n10,0\n")
+    return d
+
+
+@pytest.mark.parametrize("args,field", [
+    (("empty.ply",), "no valid point"),
+    (("scan.ply", "--nominal", "open.csv"), "not closed"),
+    (("scan.ply", "--nominal", "units.csv"), "unit does not parse"),
+    (("scan.ply", "--nominal", "values.csv"), "not two finite numbers"),
+    (("scan.ply", "--nominal", "teapot"), "teapot"),
+    (("scan.ply", "--tolerance-mm", "0.1"), "--nominal"),
+    (("scan.ply", "--nominal", "plug-gauge", "--tolerance-mm", "-1"), "--tolerance-mm"),
+    (("scan.ply", "--nominal", "plug-gauge", "--upper-mm", "0.1"), "--upper-mm"),
+    (("scan.ply", "--nominal", "plug-gauge", "--upper-mm", "-0.1", "--lower-mm", "0.1"),
+     "upper"),
+    (("scan.ply", "--lump-mm", "abc"), "--lump-mm"),
+    (("scan.ply", "--u-radial-mm", "-0.001"), "--u-radial-mm"),
+    (("nope.ply",), "nope.ply"),
+    (("scan.ply", "--calibration", "nope.json"), "nope.json"),
+    (("scan.ply", "--truth", "."), "--truth"),
+])
+def test_bad_input_is_one_line_exit_2_nothing_written(args, field, files, tmp_path,
+                                                      monkeypatch, capsys):
+    monkeypatch.chdir(files)
+    out = tmp_path / "report"
+    assert main(["inspect", *args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err and field in lines[0]
+    assert list(tmp_path.iterdir()) == []  # nothing half-written
+
+
+def test_a_report_from_a_cloud_file(files, tmp_path, capsys):
+    out = tmp_path / "report"
+    assert main(["inspect", str(files / "scan.ply"), "--out", str(out), "--nominal",
+                 "plug-gauge:d=20", "--upper-mm", "0.1", "--lower-mm", "-0.1"]) == 0
+    data = json.loads((out / "inspection.json").read_text())
+    assert data["n_sections"] == 3 and data["nominal"]["pass"] is True
+    assert "PASS" in capsys.readouterr().out
+
+
+def test_a_radial_offset_adds_to_sizes_only():
+    from lts360.inspect.run import inspect_cloud
+
+    cloud = scan_cloud(n_sections=1, noise_mm=0.002)
+    a = inspect_cloud(cloud).data["sections"][0]
+    b = inspect_cloud(cloud, u_radial_mm=0.003).data["sections"][0]
+    assert b["d_ls_mm"]["u"] == pytest.approx(np.hypot(a["d_ls_mm"]["u"], 0.006))
+    assert b["d_min_mm"]["u"] == pytest.approx(np.hypot(a["d_min_mm"]["u"], 0.006))
+    for key in ("ovality_mm", "centre_x_mm"):
+        assert b[key]["u"] == a[key]["u"]
+    assert b["ront_mm"]["MZCI"]["u"] == a["ront_mm"]["MZCI"]["u"]

@@ -1,0 +1,110 @@
+"""The report: files, units in the JSON names, one CSV row per section, nothing half-written,
+and the HTML page opened in a real headless browser."""
+
+import csv
+import json
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from lts360.inspect.nominal import ToleranceBand, load_nominal
+from lts360.inspect.report import FIGURES, write_report
+from lts360.inspect.run import inspect_cloud
+
+from _profiles import scan_cloud
+
+
+@pytest.fixture(scope="module")
+def report_dir(tmp_path_factory):
+    cloud = scan_cloud(n_sections=6, dent_mm=0.1, dent_z_mm=0.34, noise_mm=0.001)
+    ins = inspect_cloud(cloud, nominal=load_nominal("plug-gauge:d=20"),
+                        band=ToleranceBand.symmetric(0.08), source="synthetic.ply")
+    return write_report(ins, tmp_path_factory.mktemp("r") / "report")
+
+
+def test_files_json_and_csv(report_dir):
+    names = {p.name for p in report_dir.iterdir()}
+    assert names == {"inspection.json", "sections.csv", "report.html", *FIGURES}
+    data = json.loads((report_dir / "inspection.json").read_text())
+    s = data["sections"][0]
+    assert set(s["ront_mm"]) == {"LSCI", "MZCI", "MCCI", "MICI"}
+    q = s["d_ls_mm"]
+    assert set(q) == {"value", "u", "U_k2"} and q["U_k2"] == pytest.approx(2 * q["u"])
+    assert "ovality_over_sum_pct" in s and "ovality_over_mean_pct" in s
+    # 100.0° < θ < 104.0° in 0.1° float steps: 40 samples
+    assert s["gaps"] and s["gaps"][0]["flags"] == {"NO_PEAK": 40}
+    assert data["nominal"]["pass"] is False  # ±0.04 mm: the ovality (±0.05 mm) breaks it
+    rows = list(csv.DictReader(open(report_dir / "sections.csv")))
+    assert len(rows) == 6 and "U_d_ls_mm" in rows[0] and "ront_mzci_mm" in rows[0]
+
+
+def test_a_failed_write_leaves_nothing(tmp_path, monkeypatch):
+    from lts360.inspect import report
+
+    ins = inspect_cloud(scan_cloud(n_sections=2))
+    monkeypatch.setattr(report, "_fig_polar", lambda ins, k: 1 / 0)  # after the JSON and CSV
+    with pytest.raises(ZeroDivisionError):
+        write_report(ins, tmp_path / "out")
+    assert list(tmp_path.iterdir()) == []
+
+
+_CHECK = """<script>window.addEventListener('load', () => {
+  const imgs = [...document.images].map(i => i.naturalWidth + 'x' + i.naturalHeight);
+  const pre = document.createElement('pre'); pre.id = 'check';
+  pre.textContent = JSON.stringify({imgs, tables: document.querySelectorAll('table').length,
+    rows: document.querySelectorAll('tbody tr').length});
+  document.body.appendChild(pre);
+});</script></body>"""
+
+
+def test_the_page_renders_in_a_headless_browser(report_dir, tmp_path):
+    exe = shutil.which("chromium") or shutil.which("chromium-browser")
+    if exe is None:
+        pytest.skip("chromium is not installed (apt-get install chromium): the page is not "
+                    "opened in a browser")
+    page = tmp_path / "page.html"
+    page.write_text((report_dir / "report.html").read_text().replace("</body>", _CHECK))
+    proc = subprocess.run([exe, "--headless", "--no-sandbox", "--disable-gpu",
+                           "--virtual-time-budget=5000", "--dump-dom", page.as_uri()],
+                          capture_output=True, text=True, timeout=120)
+    dom = proc.stdout
+    assert '<pre id="check">' in dom, proc.stderr[-2000:]
+    check = json.loads(dom.split('<pre id="check">')[1].split("</pre>")[0]
+                       .replace("&quot;", '"'))
+    assert len(check["imgs"]) == len(FIGURES)
+    assert all(int(w) > 100 and int(h) > 100 for w, h in (s.split("x") for s in check["imgs"]))
+    assert check["tables"] >= 3 and check["rows"] >= 6  # scan, events, sections (6 rows), gaps
+
+
+def test_a_single_section_report(tmp_path):
+    ins = inspect_cloud(scan_cloud(n_sections=1, gap_deg=None))
+    out = write_report(ins, tmp_path / "one")
+    assert "axis" not in ins.data["scan"]
+    assert np.isfinite(ins.data["sections"][0]["ront_mm"]["MZCI"]["value"])
+    assert (out / "report.html").stat().st_size > 10_000
+
+
+def test_a_section_seen_over_an_arc_only_is_reported_with_a_warning():
+    from lts360.recon.triangulation.cloud import Cloud
+
+    th = np.radians(np.arange(-60.0, 60.0, 0.1))
+    r = 10 + 0.05 * np.cos(2 * th)
+    n = th.size
+    cloud = Cloud(np.column_stack([r * np.cos(th), r * np.sin(th), np.zeros(n)]), th, r,
+                  np.zeros(n, np.uint8), np.zeros(n, np.uint8), np.zeros(n, np.int32),
+                  np.ones(n, np.float32))
+    ins = inspect_cloud(cloud)
+    s = ins.data["sections"][0]
+    assert s["coverage_deg"] == pytest.approx(120.0, abs=0.6)
+    assert s["warnings"] and "240°" in s["warnings"][0]
+    assert s["d_min_mm"]["value"] is None  # no direction has both ends measured
+    from lts360.inspect.report import _html
+
+    assert "<h2>Warnings</h2>" in _html(ins.data, {})
+
+
+def test_the_json_is_strict(report_dir):
+    text = (report_dir / "inspection.json").read_text()
+    json.loads(text, parse_constant=lambda c: pytest.fail(f"{c} in inspection.json"))

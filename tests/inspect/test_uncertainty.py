@@ -1,0 +1,58 @@
+"""Uncertainty: the re-triangulation round trip, the calibration Monte Carlo, the scatter
+component against the spread of repeated noisy sections."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from lts360.inspect.section import analyse_section
+from lts360.inspect.uncertainty import calibration_u, retriangulate, scatter_u
+
+from _profiles import polar
+
+
+@pytest.fixture(scope="module")
+def cal():
+    from lts360.recon.calibration.model import calibration_from_dict
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.io import rig_truth
+
+    rig = load_rig("paper")
+    return calibration_from_dict(rig_truth(rig, rig.camera.K, rig.camera.image_size))
+
+
+def _views(xy):
+    th = np.degrees(np.arctan2(xy[:, 1], xy[:, 0]))
+    return np.where(th < -30, "direct", np.where(th < 90, "right", "left"))
+
+
+def test_retriangulating_with_the_same_calibration_is_the_identity(cal):
+    xy = polar(lambda t: np.full_like(t, 10.0), step_deg=1.0)
+    back = retriangulate(xy, _views(xy), cal, cal)
+    assert back == pytest.approx(xy, abs=1e-9)  # projection and ray ∩ plane invert each other
+
+
+def test_calibration_monte_carlo(cal):
+    xy = polar(lambda t: np.full_like(t, 10.0), step_deg=0.5)
+    assert calibration_u([xy], [_views(xy)], cal) is None  # no covariance: no component
+    unc = {"laser_plane": {"cov_abd": np.diag([1e-8, 1e-8, 1e-4]).tolist()}}  # δ: 10 µm
+    noisy = dataclasses.replace(cal, uncertainty=unc)
+    u = calibration_u([xy, xy], [_views(xy)] * 2, noisy, n_draws=12, seed=3)
+    assert len(u) == 2 and u[0] == u[1]  # the same points give the same u
+    assert 1e-5 < u[0]["d_ls_mm"] < 0.05  # a 10 µm plane offset changes the scale a little
+    again = calibration_u([xy], [_views(xy)], noisy, n_draws=12, seed=3)
+    assert again[0] == u[0]  # seeded
+
+
+def test_scatter_u_of_the_ls_diameter_matches_repeated_sections():
+    rng = np.random.default_rng(5)
+    sigma = 0.003
+    d, us = [], []
+    for _ in range(30):
+        s = analyse_section(polar(lambda t: 10.0 + sigma * rng.normal(size=t.size)))
+        d.append(s.ls.diameter_mm)
+        us.append(scatter_u(s.scatter_mm, s.n_valid, s.points_per_bin)["d_ls_mm"])
+    assert np.mean(us) == pytest.approx(2 * sigma / np.sqrt(3600), rel=0.05)
+    # 30 repeats: the sample std is within ±40 % of the true one (chi, 29 dof, > 99 %)
+    assert np.std(d, ddof=1) == pytest.approx(np.mean(us), rel=0.4)
