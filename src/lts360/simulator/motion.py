@@ -118,12 +118,14 @@ def simulate_moving_frame(rig: Rig, obj: SceneObject, acq: Acquisition, *,
                           seed: int = 0, noise: str = "none", scale: float = 1.0,
                           max_bounces: int = 2, thin_lens: bool = True,
                           step_px: float = DEFAULT_STEP_PX, n_subframes: int | None = None,
-                          speckle_seed: int | None = None) -> Frame:
+                          speckle_seed: int | None = None, freeze: bool = False) -> Frame:
     """One frame of ``obj`` moving as ``acq.motion`` says, triggered at ``t_trigger_s``
     (the stage at ``z_mm`` then), exposed for ``acq.exposure_time_s`` through ``acq.shutter``.
 
     ``n_subframes`` overrides the sub-frames per exposure chosen from ``step_px``
-    (:func:`subframe_count`).  ``truth["motion"]`` records the acquisition, the sub-frames, and
+    (:func:`subframe_count`).  ``freeze``: the same sub-frames and samples with the object
+    held at its pose at the trigger (common random numbers: its difference from the moving
+    frame is the motion's alone, without Monte Carlo noise).  ``truth["motion"]`` records the acquisition, the sub-frames, and
     per view the mean row of its image of the section, the middle of that row's exposure, and
     the section's height on the object and the object's pose then.
 
@@ -169,7 +171,8 @@ def simulate_moving_frame(rig: Rig, obj: SceneObject, acq: Acquisition, *,
     t0 = time.perf_counter()
     for j, (tm, (rows, wts)) in enumerate(zip(mids, parts)):
         mesh = mesh0.copy()
-        mesh.apply_transform(acq.motion.transform(t_trigger_s + tm) @ T_stage)
+        t_pose = t_trigger_s + (0.0 if freeze else tm)
+        mesh.apply_transform(acq.motion.transform(t_pose) @ T_stage)
         spec = SceneSpec(rig, (("object", mesh, material_to_bsdf(obj.material)),))
         px = np.column_stack([np.tile(xs, len(rows)), np.repeat(rows, w)])
         rad, las, _ = render_pixels(spec, px, spp=spp_sub, seed=(seed * 100_003 + j) % 2**31,
@@ -206,7 +209,7 @@ def simulate_moving_frame(rig: Rig, obj: SceneObject, acq: Acquisition, *,
                    "speckle_seed": speckle_seed, "magnification": magnification,
                    "bit_depth": rig.sensor.bit_depth, "model": rig.sensor.to_dict()},
         "motion": {"acquisition": acq.to_dict(), "t_trigger_s": float(t_trigger_s),
-                   "subframes_per_exposure": n_sub, "spp_per_subframe": spp_sub,
+                   "frozen": bool(freeze), "subframes_per_exposure": n_sub, "spp_per_subframe": spp_sub,
                    "renders": len(mids), "views": views},
     })
     return Frame(image=image, render=res, exposure_time_s=float(exposure_time_s), truth=truth,
