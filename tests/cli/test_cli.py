@@ -36,6 +36,20 @@ def run(*args):
     (("study", "examples", "--out", "s", "--objects", "teapot"), "teapot"),
     (("study", "algorithms", "--out", "s", "--workers", "2", "--dask", "tcp://x:1"), "--dask"),
     (("study", "nonsense", "--out", "s"), "nonsense"),
+    (("render", "--object", "plug-gauge", "--out", "f", "--speed-mm-s", "100"), "--exposure-us"),
+    (("render", "--object", "plug-gauge", "--out", "f", "--exposure-us", "-5",
+      "--speed-mm-s", "100"), "--exposure-us"),
+    (("render", "--object", "plug-gauge", "--out", "f", "--exposure-us", "100",
+      "--shutter", "rolling"), "line_time_s"),
+    (("render", "--object", "plug-gauge", "--out", "f", "--exposure-us", "100",
+      "--vibration-mm", "1,x"), "--vibration-mm"),
+    (("render", "--object", "plug-gauge", "--out", "f", "--exposure-us", "100", "--scale", "0.125",
+      "--speed-mm-s", "1e6"), "measured zone"),
+    (("render", "--object", "plug-gauge", "--out", "f", "--exposure-us", "100", "--scale", "0.125",
+      "--shutter", "rolling", "--line-time-us", "100", "--profile-rate-hz", "100"),
+     "trigger period"),
+    (("render", "--object", "plug-gauge", "--out", "f", "--exposure-us", "100",
+      "--speed-mm-s", "100", "--sections", "3"), "--profile-rate-hz"),
     (("compensate", "ref", "--calibration", "nope.json", "--out", "c.json"), "nope.json"),
     (("compensate", "ref", "--calibration", "c.json", "--out", "c2.json", "--band-mm", "20"),
      "--band-mm"),
@@ -99,3 +113,18 @@ def test_version_prints_the_installed_version_and_exits_0(capsys):
 
     assert main(["--version"]) == 0
     assert capsys.readouterr().out.strip() == f"lts360 {version('lts360')}"
+
+
+def test_render_a_moving_scan_triggered_at_a_profile_rate(tmp_path, capsys):
+    import json
+
+    out = tmp_path / "scan"
+    assert main(["render", "--object", "plug-gauge", "--out", str(out), "--scale", "0.0625",
+                 "--spp", "1", "--exposure-us", "100", "--speed-mm-s", "100",
+                 "--profile-rate-hz", "50", "--sections", "2"]) == 0
+    scan = json.loads((out / "scan.json").read_text())
+    assert [s["t_trigger_s"] for s in scan["sections"]] == [0.0, 0.02]
+    assert scan["sections"][1]["z_mm"] == pytest.approx(-2.0)  # 100 mm/s for 20 ms
+    frame = json.loads((out / "section_0001" / "frame.json").read_text())
+    assert frame["motion"]["t_trigger_s"] == 0.02
+    assert frame["motion"]["acquisition"]["trigger"]["profile_rate_hz"] == 50.0

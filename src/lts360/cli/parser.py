@@ -75,6 +75,22 @@ def build_parser() -> argparse.ArgumentParser:
                    help="add a matte black base plate at this height (default: none)")
     s.add_argument("--sections", type=int, default=1, help="render a scan of N sections")
     s.add_argument("--pitch-mm", type=float, default=0.0, help="stage pitch of a scan (mm)")
+    m = s.add_argument_group("line motion (a moving object; needs --exposure-us)")
+    m.add_argument("--speed-mm-s", type=float, default=0.0, help="feed along the axis, mm/s")
+    m.add_argument("--vibration-mm", default=None, metavar="AX,AY",
+                   help="lateral vibration amplitudes in x and y, mm")
+    m.add_argument("--vibration-hz", type=float, default=0.0, help="vibration frequency")
+    m.add_argument("--rotation-deg-s", type=float, default=0.0, help="rotation about the axis")
+    m.add_argument("--shutter", choices=("global", "rolling"), default="global")
+    m.add_argument("--line-time-us", type=float, default=0.0,
+                   help="rolling shutter: delay between rows' exposures (µs)")
+    m.add_argument("--profile-rate-hz", type=float, default=None,
+                   help="a moving scan: frames at this rate")
+    m.add_argument("--encoder-pitch-mm", type=float, default=None,
+                   help="a moving scan: a frame every this much feed")
+    m.add_argument("--jitter-us", type=float, default=0.0, help="trigger timing jitter (σ, µs)")
+    m.add_argument("--step-px", type=float, default=0.1,
+                   help="sub-frames: no object point moves more than this many pixels in one")
     s.set_defaults(func=cmd_render)
 
     s = sub.add_parser("measure", help="inverse triangulation of frames, scans or images")
