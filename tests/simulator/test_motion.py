@@ -178,3 +178,35 @@ def test_rolling_shutter_shifts_each_view_of_a_tilted_cylinder_as_predicted(vari
             # moves by up to 13 % less than the section: a measurement effect, not timing)
             c_pred = centre(pts[:, :2] - np.outer(v * t / a[2], a[:2]))
             assert np.linalg.norm(c_meas - c_pred) < 0.05 * np.linalg.norm(c_pred - c_frozen)
+
+
+def test_measure_tags_each_point_with_its_rows_time_and_z(variant, paper, tmp_path):
+    # A rolling-shutter frame written to disk and measured: every point carries the time of
+    # its own row (from the acquisition in frame.json, not the truth) and the section's
+    # height then; the mirror views (upper rows) come before the direct view.
+    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.triangulation.cloud import VIEW_CODES, read_cloud, write_cloud
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.measure import collect_sections, measure_sections
+    from lts360.simulator.frame import write_frame
+    from lts360.simulator.motion import simulate_moving_frame
+
+    line, E, v = 2e-5, 1e-4, 200.0
+    acq = Acquisition(E, shutter=Shutter("rolling", line), motion=Motion(speed_mm_s=v))
+    frame = simulate_moving_frame(paper, build_object("plug-gauge"), acq, t_trigger_s=0.01,
+                                  z_mm=3.0, spp=4, seed=1, scale=0.25)
+    write_frame(tmp_path / "f", frame)
+    cal = load_calibration(tmp_path / "f" / "frame.json")
+    (section,) = collect_sections([tmp_path / "f"])
+    assert section.z_mm == pytest.approx(3.0 - v * 0.01)  # the section's height at the trigger
+    grid = CylGrid.from_ranges((8.0, 12.0), theta_step_deg=1.0, r_step_mm=0.01)
+    cloud = measure_sections([section], cal, grid)
+    ok = cloud.valid
+    assert ok.sum() > 300
+    t = cloud.time_s[ok]
+    assert np.all((t > 0.01) & (t < 0.01 + 256 * line + E))
+    np.testing.assert_allclose(cloud.points_mm[ok, 2], section.z_mm - v * (t - 0.01), atol=1e-9)
+    view = cloud.view[ok]
+    assert t[view == VIEW_CODES["left"]].mean() < t[view == VIEW_CODES["direct"]].mean()
+    back = read_cloud(write_cloud(tmp_path / "c.ply", cloud))
+    np.testing.assert_array_equal(back.time_s, cloud.time_s)

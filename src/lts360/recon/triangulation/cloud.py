@@ -24,6 +24,8 @@ VIEW_NAMES = {v: k for k, v in VIEW_CODES.items()}
 _FIELDS = (("x", "<f8", "double"), ("y", "<f8", "double"), ("z", "<f8", "double"),
            ("theta", "<f8", "double"), ("radius", "<f8", "double"), ("view", "u1", "uchar"),
            ("quality", "u1", "uchar"), ("section", "<i4", "int"), ("intensity", "<f4", "float"))
+#: The optional last property: the exposure time of the point's row (s).
+_TIME = ("time", "<f8", "double")
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,6 +44,10 @@ class Cloud:
         SATURATED (2); an invalid one (NaN) keeps the reason it gave no point.
     section : (n,) int32
     intensity : (n,) float32
+    time_s : (n,) float, optional
+        When the point's image row was exposed (middle of its exposure, s from the scan's
+        first trigger), for frames of a moving object (:func:`~lts360.recon.triangulation.
+        measure.row_timing`); ``None`` for still frames.  Stored as a ``time`` property.
     """
 
     points_mm: np.ndarray
@@ -51,6 +57,7 @@ class Cloud:
     quality: np.ndarray
     section: np.ndarray
     intensity: np.ndarray
+    time_s: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.points_mm)
@@ -59,6 +66,8 @@ class Cloud:
         for name in ("theta_rad", "radius_mm", "view", "quality", "section", "intensity"):
             if len(getattr(self, name)) != n:
                 raise ValueError(f"{name} must have {n} entries, got {len(getattr(self, name))}")
+        if self.time_s is not None and len(self.time_s) != n:
+            raise ValueError(f"time_s must have {n} entries, got {len(self.time_s)}")
 
     def __len__(self) -> int:
         return len(self.points_mm)
@@ -70,7 +79,8 @@ class Cloud:
     def select(self, mask: np.ndarray) -> "Cloud":
         return Cloud(*(np.asarray(getattr(self, f))[mask] for f in
                        ("points_mm", "theta_rad", "radius_mm", "view", "quality", "section",
-                        "intensity")))
+                        "intensity")),
+                     time_s=None if self.time_s is None else np.asarray(self.time_s)[mask])
 
     @staticmethod
     def concatenate(clouds: list["Cloud"]) -> "Cloud":
@@ -78,20 +88,28 @@ class Cloud:
         if not clouds:
             return Cloud(np.zeros((0, 3)), *(np.zeros(0, dtype=d) for d in
                                              (float, float, np.uint8, np.uint8, np.int32, np.float32)))
-        return Cloud(*(np.concatenate([getattr(c, n) for c in clouds]) for n in names))
+        times = None
+        if any(c.time_s is not None for c in clouds):  # NaN where a part has no timing
+            times = np.concatenate([np.full(len(c), np.nan) if c.time_s is None
+                                    else np.asarray(c.time_s, float) for c in clouds])
+        return Cloud(*(np.concatenate([getattr(c, n) for c in clouds]) for n in names),
+                     time_s=times)
 
 
 def write_cloud(path, cloud: Cloud) -> Path:
     """Binary PLY with the attributes above (written to a temporary name, then renamed)."""
     path = Path(path)
     n = len(cloud)
-    rec = np.empty(n, dtype=[(name, dt) for name, dt, _ in _FIELDS])
+    fields = _FIELDS + ((_TIME,) if cloud.time_s is not None else ())
+    rec = np.empty(n, dtype=[(name, dt) for name, dt, _ in fields])
     rec["x"], rec["y"], rec["z"] = (cloud.points_mm[:, k] for k in range(3))
     rec["theta"], rec["radius"] = cloud.theta_rad, cloud.radius_mm
     rec["view"], rec["quality"] = cloud.view, cloud.quality
     rec["section"], rec["intensity"] = cloud.section, cloud.intensity
+    if cloud.time_s is not None:
+        rec["time"] = cloud.time_s
     header = ["ply", "format binary_little_endian 1.0", "comment lts360 measured cloud, mm",
-              f"element vertex {n}"] + [f"property {ply} {name}" for name, _, ply in _FIELDS]
+              f"element vertex {n}"] + [f"property {ply} {name}" for name, _, ply in fields]
     header.append("end_header")
     tmp = path.with_name(f".{path.name}.tmp")
     with open(tmp, "wb") as f:
@@ -116,12 +134,14 @@ def read_cloud(path) -> Cloud:
         raise ValueError(f"cloud {path}: expected binary_little_endian PLY")
     n = next((int(line.split()[2]) for line in header if line.startswith("element vertex")), None)
     props = [line.split()[2] for line in header if line.startswith("property")]
-    if n is None or props != [name for name, _, _ in _FIELDS]:
-        raise ValueError(f"cloud {path}: vertex properties must be {[f[0] for f in _FIELDS]}, "
-                         f"got {props}")
-    dt = np.dtype([(name, d) for name, d, _ in _FIELDS])
+    fields = _FIELDS + ((_TIME,) if props and props[-1] == _TIME[0] else ())
+    if n is None or props != [name for name, _, _ in fields]:
+        raise ValueError(f"cloud {path}: vertex properties must be {[f[0] for f in _FIELDS]} "
+                         f"(and optionally {_TIME[0]!r}), got {props}")
+    dt = np.dtype([(name, d) for name, d, _ in fields])
     rec = np.frombuffer(data, dtype=dt, count=n, offset=end + len(b"end_header\n"))
     pts = np.column_stack([rec["x"], rec["y"], rec["z"]]).astype(float)
     return Cloud(pts, rec["theta"].astype(float), rec["radius"].astype(float),
                  rec["view"].copy(), rec["quality"].copy(), rec["section"].astype(np.int32),
-                 rec["intensity"].astype(np.float32))
+                 rec["intensity"].astype(np.float32),
+                 time_s=rec["time"].astype(float) if "time" in rec.dtype.names else None)

@@ -20,16 +20,50 @@ from lts360.recon.triangulation.inverse import (InversePlan, InverseResult, inve
                                                 plan_inverse)
 from lts360.recon.triangulation.peaks import Quality
 
-__all__ = ["Section", "collect_sections", "measure_sections", "measure_sections_following",
+__all__ = ["RowTiming", "Section", "collect_sections", "measure_sections", "measure_sections_following",
            "make_runner", "result_to_cloud", "read_image", "BandLog"]
 
 
 @dataclass(frozen=True)
+class RowTiming:
+    """When each image row of a frame was exposed, from the line's acquisition settings and
+    the trigger log (what a real line records; never the object's truth).
+
+    ``t_trigger_s``: the frame's trigger; ``exposure_s``; ``line_time_s`` (0: global shutter);
+    ``speed_mm_s``: the feed the encoder reports.  Row ``y`` is exposed around
+    ``t = t_trigger + y · line_time + exposure / 2``, and the laser plane then cuts the
+    object at ``z_trigger − speed · (t − t_trigger)``.
+    """
+
+    t_trigger_s: float
+    exposure_s: float
+    line_time_s: float = 0.0
+    speed_mm_s: float = 0.0
+
+    @staticmethod
+    def from_motion(motion: dict | None) -> "RowTiming | None":
+        """From a frame's ``motion`` record (``frame.json``): its ``acquisition`` and
+        ``t_trigger_s`` only."""
+        if not motion:
+            return None
+        acq = motion["acquisition"]
+        sh = acq.get("shutter", {})
+        return RowTiming(float(motion.get("t_trigger_s", 0.0)), float(acq["exposure_time_s"]),
+                         float(sh.get("line_time_s", 0.0)) if sh.get("kind") == "rolling" else 0.0,
+                         float(acq.get("motion", {}).get("speed_mm_s", 0.0)))
+
+    def row_time_s(self, rows) -> np.ndarray:
+        return self.t_trigger_s + np.asarray(rows, float) * self.line_time_s + 0.5 * self.exposure_s
+
+
+@dataclass(frozen=True)
 class Section:
-    """One image of a scan and the stage position it was taken at."""
+    """One image of a scan, the stage position it was taken at and, for a moving object, the
+    timing of its rows."""
 
     image_path: Path
     z_mm: float
+    timing: RowTiming | None = None
 
 
 def read_image(path: Path) -> np.ndarray:
@@ -55,12 +89,21 @@ def collect_sections(inputs, *, pitch_mm: float | None = None) -> list[Section]:
         p = Path(item)
         if p.is_dir() and (p / "scan.json").is_file():
             scan = json.loads((p / "scan.json").read_text())
-            out += [Section(p / s["dir"] / "image.png", float(s["z_mm"])) for s in scan["sections"]]
+            for s in scan["sections"]:
+                timing = None
+                if "t_trigger_s" in s and "acquisition" in scan:
+                    timing = RowTiming.from_motion({"acquisition": scan["acquisition"],
+                                                    "t_trigger_s": s["t_trigger_s"]})
+                out.append(Section(p / s["dir"] / "image.png", float(s["z_mm"]), timing))
         elif p.is_dir() and (p / "image.png").is_file():
-            z = 0.0
+            z, timing = 0.0, None
             if (p / "frame.json").is_file():
-                z = float(json.loads((p / "frame.json").read_text()).get("stage", {}).get("z_mm", 0.0))
-            out.append(Section(p / "image.png", z))
+                meta = json.loads((p / "frame.json").read_text())
+                z = float(meta.get("stage", {}).get("z_mm", 0.0))
+                timing = RowTiming.from_motion(meta.get("motion"))
+                if timing is not None:  # the section's height at the trigger
+                    z -= timing.speed_mm_s * timing.t_trigger_s
+            out.append(Section(p / "image.png", z, timing))
         elif p.is_file():
             if pitch_mm is None:
                 raise ValueError(f"{p}: a bare image needs --pitch-mm to place it on the stage")
@@ -72,20 +115,36 @@ def collect_sections(inputs, *, pitch_mm: float | None = None) -> list[Section]:
     return out
 
 
-def result_to_cloud(result: InverseResult, *, z_mm: float, section: int) -> Cloud:
-    """Every θ of every view (valid or not, with its quality) as cloud rows."""
+def result_to_cloud(result: InverseResult, *, z_mm: float, section: int,
+                    timing: RowTiming | None = None, cal: Calibration | None = None) -> Cloud:
+    """Every θ of every view (valid or not, with its quality) as cloud rows.
+
+    ``timing`` (a moving object; needs ``cal``): each point gets the time of its own image
+    row's exposure (the row where its view images it) and ``z`` the section's height then
+    (``z_mm`` at the trigger); a θ without a point gets NaN."""
+    from lts360.recon.triangulation.views import get_views, project_meas_points
+
     parts = []
     for name, v in result.views.items():
         m = v.window
         n = int(m.sum())
         r = v.r_mm[m]
         th = v.theta_rad[m]
-        pts = np.column_stack([r * np.cos(th), r * np.sin(th), np.full(n, float(z_mm))])
+        z = np.full(n, float(z_mm))
+        times = None
+        if timing is not None:
+            if cal is None:
+                raise ValueError("result_to_cloud: timing needs the calibration")
+            xyz = np.column_stack([r * np.cos(th), r * np.sin(th), np.zeros(n)])
+            (view,) = get_views(cal, [name])
+            times = timing.row_time_s(project_meas_points(xyz, cal, view)[:, 1])
+            z = np.where(np.isfinite(times), z - timing.speed_mm_s * (times - timing.t_trigger_s), z)
+        pts = np.column_stack([r * np.cos(th), r * np.sin(th), z])
         code = VIEW_CODES.get(name, 255)
         intensity = np.nan_to_num(v.intensity[m]).astype(np.float32)
         quality = v.quality[m].astype(np.uint8)
         parts.append(Cloud(pts, th, r, np.full(n, code, np.uint8), quality,
-                           np.full(n, section, np.int32), intensity))
+                           np.full(n, section, np.int32), intensity, time_s=times))
     return Cloud.concatenate(parts)
 
 
@@ -177,7 +236,8 @@ def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *
     clouds = []
     items = list(enumerate(sections))
     for k, s in (progress(items) if progress else items):
-        clouds.append(result_to_cloud(measure(read_image(s.image_path)), z_mm=s.z_mm, section=k))
+        clouds.append(result_to_cloud(measure(read_image(s.image_path)), z_mm=s.z_mm, section=k,
+                                      timing=s.timing, cal=cal))
     return Cloud.concatenate(clouds)
 
 
@@ -311,5 +371,5 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
         else:
             log.found.append(True)
         log.r_range_mm.append(current[0].r_range_mm)
-        clouds.append(result_to_cloud(res, z_mm=s.z_mm, section=k))
+        clouds.append(result_to_cloud(res, z_mm=s.z_mm, section=k, timing=s.timing, cal=cal))
     return Cloud.concatenate(clouds), current[0], log
