@@ -21,6 +21,7 @@ from lts360.cli.studies import (
     cmd_study_algorithms,
     cmd_study_design_space,
     cmd_study_examples,
+    cmd_study_line_speed,
     cmd_study_monte_carlo,
     cmd_study_plug_gauge,
 )
@@ -263,6 +264,23 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--section-scale", type=float, default=1.0,
                    help="fraction of the paper's sections to scan (quick looks)")
     q.set_defaults(func=cmd_study_examples)
+
+    q = study_parser("line-speed", "a moving object: speed × exposure × shutter (global, "
+                     "rolling); errors per view as one instant and row-aware, lumps missed")
+    q.add_argument("--objects", default=None, help="comma-separated (default cable-8,grooved-shaft)")
+    q.add_argument("--speeds-mm-s", default="0,100,300,1000", help="comma-separated feeds")
+    q.add_argument("--exposures-us", default="100", help="comma-separated exposures")
+    q.add_argument("--shutters", default="global,rolling", help="global, rolling or both")
+    q.add_argument("--line-time-us", type=float, default=10.0, help="rolling shutter line time")
+    q.add_argument("--profile-rate-hz", type=float, default=200.0,
+                   help="section rate for the lumps-missed table")
+    q.add_argument("--accuracy-um", type=float, default=20.0,
+                   help="what the motion may add to the still frame's robust RMS error")
+    q.add_argument("--noise", choices=("none", "realistic"), default="none")
+    q.add_argument("--spp", type=int, default=16)
+    q.add_argument("--scale", type=float, default=0.5, help="image scale (default 0.5)")
+    q.add_argument("--rig", default="paper")
+    q.set_defaults(func=cmd_study_line_speed)
 
     q = study_parser("design-space", "α/β sweep: coverage, overlap, multiple reflections, "
                      "Monte Carlo radius uncertainty, heat maps, optimum")

@@ -178,3 +178,60 @@ def cmd_demo(args) -> int:
     run_demo(Path(args.out), radius_mm=args.radius_mm, render=render, paper=not args.quick,
              gauge_trials=args.gauge_trials, seed=args.seed)
     return 0
+
+
+def _floats(text: str, option: str, *, positive: bool = False, nonneg: bool = False) -> list[float]:
+    try:
+        vals = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise UsageError(f"{option}: expected comma-separated numbers, got {text!r}")
+    if not vals:
+        raise UsageError(f"{option}: no value given")
+    if positive and min(vals) <= 0:
+        raise UsageError(f"{option}: every value must be > 0, got {text!r}")
+    if nonneg and min(vals) < 0:
+        raise UsageError(f"{option}: every value must be >= 0, got {text!r}")
+    return vals
+
+
+def cmd_study_line_speed(args) -> int:
+    from lts360.experiments.line_speed import (DEFAULT_OBJECTS, format_line_speed,
+                                               run_line_speed_study)
+    from lts360.scenes.objects import object_types
+
+    common = _study_common(args)
+    objects = args.objects.split(",") if args.objects else list(DEFAULT_OBJECTS)
+    known = set(object_types())
+    for name in objects:
+        if name.split(":")[0] not in known:
+            raise UsageError(f"--objects: unknown object {name!r}")
+    speeds = _floats(args.speeds_mm_s, "--speeds-mm-s")
+    exposures = _floats(args.exposures_us, "--exposures-us", positive=True)
+    shutters = args.shutters.split(",")
+    if not shutters or any(s not in ("global", "rolling") for s in shutters):
+        raise UsageError(f"--shutters: global, rolling or both, got {args.shutters!r}")
+    if "rolling" in shutters and not args.line_time_us > 0:
+        raise UsageError(f"--line-time-us: must be > 0 for a rolling shutter, got {args.line_time_us}")
+    if not args.profile_rate_hz > 0:
+        raise UsageError(f"--profile-rate-hz: must be > 0, got {args.profile_rate_hz}")
+    if not args.accuracy_um > 0:
+        raise UsageError(f"--accuracy-um: must be > 0, got {args.accuracy_um}")
+    if not 0 < args.scale <= 1:
+        raise UsageError(f"--scale: must be in (0, 1], got {args.scale}")
+    if not 1 <= args.spp <= 4096:
+        raise UsageError(f"--spp: must be in [1, 4096], got {args.spp}")
+    _study_rig(args.rig)
+    _set_variant(args.variant)
+    try:
+        table = run_line_speed_study(args.out, objects=objects, speeds_mm_s=speeds,
+                                     exposures_us=exposures, shutters=shutters,
+                                     line_time_us=args.line_time_us, scale=args.scale,
+                                     spp=args.spp, noise=args.noise, rig=args.rig,
+                                     accuracy_um=args.accuracy_um,
+                                     profile_rate_hz=args.profile_rate_hz,
+                                     workers=args.workers or 1, **common)
+    except ValueError as exc:  # e.g. a feed that leaves the object's measured zone
+        raise UsageError(f"line-speed: {exc}")
+    print(format_line_speed(table))
+    print(f"wrote {args.out}/ (table.txt, table.json, line-speed.png, trials/results.nc)")
+    return 0
