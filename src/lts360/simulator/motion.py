@@ -34,7 +34,7 @@ from lts360.scenes.rig import Rig
 from lts360.simulator.frame import Frame, sensor_image, simulate_frame, stage_transform
 from lts360.simulator.io import rig_truth
 from lts360.simulator.materials import material_to_bsdf
-from lts360.simulator.render import RenderResult, render_pixels, require_variant
+from lts360.simulator.render import RenderResult, prepare_scene, render_pixels, require_variant
 from lts360.simulator.scene import SceneSpec
 
 __all__ = ["subframe_count", "exposure_schedule", "simulate_moving_frame", "DEFAULT_STEP_PX"]
@@ -169,14 +169,31 @@ def simulate_moving_frame(rig: Rig, obj: SceneObject, acq: Acquisition, *,
     laser = np.zeros((h, w), np.float64)
     xs = np.arange(w)
     t0 = time.perf_counter()
+    # The scene is loaded once, with the object at its stage pose; each sub-frame moves its
+    # vertices (and turns its normals) in place: no reloading per sub-frame.
+    import mitsuba as mi
+
+    mesh = mesh0.copy()
+    mesh.apply_transform(T_stage)
+    spec = SceneSpec(rig, (("object", mesh, material_to_bsdf(obj.material)),))
+    kw = dict(spp=spp_sub, scale=scale, max_bounces=max_bounces, thin_lens=thin_lens)
+    prepared = prepare_scene(spec, **kw)
+    params = mi.traverse(prepared[0])
+    P0 = np.array(params["object.vertex_positions"], dtype=np.float64).reshape(-1, 3)
+    has_normals = "object.vertex_normals" in params and len(params["object.vertex_normals"]) > 0
+    N0 = (np.array(params["object.vertex_normals"], dtype=np.float64).reshape(-1, 3)
+          if has_normals else None)
     for j, (tm, (rows, wts)) in enumerate(zip(mids, parts)):
-        mesh = mesh0.copy()
-        t_pose = t_trigger_s + (0.0 if freeze else tm)
-        mesh.apply_transform(acq.motion.transform(t_pose) @ T_stage)
-        spec = SceneSpec(rig, (("object", mesh, material_to_bsdf(obj.material)),))
+        T = acq.motion.transform(t_trigger_s + (0.0 if freeze else tm))
+        params["object.vertex_positions"] = mi.Float((P0 @ T[:3, :3].T + T[:3, 3])
+                                                     .astype(np.float32).ravel())
+        if has_normals:
+            params["object.vertex_normals"] = mi.Float((N0 @ T[:3, :3].T)
+                                                       .astype(np.float32).ravel())
+        params.update()
         px = np.column_stack([np.tile(xs, len(rows)), np.repeat(rows, w)])
-        rad, las, _ = render_pixels(spec, px, spp=spp_sub, seed=(seed * 100_003 + j) % 2**31,
-                                    scale=scale, max_bounces=max_bounces, thin_lens=thin_lens)
+        rad, las, _ = render_pixels(spec, px, seed=(seed * 100_003 + j) % 2**31,
+                                    prepared=prepared, **kw)
         wt = np.repeat(wts, w)
         radiance[px[:, 1], px[:, 0]] += wt * rad
         laser[px[:, 1], px[:, 0]] += wt * las

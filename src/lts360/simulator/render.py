@@ -15,6 +15,7 @@ from lts360.geometry.camera import scale_intrinsics
 from lts360.simulator.scene import SceneSpec, load_scene
 
 __all__ = ["RenderResult", "render_radiance", "render_pixels", "render_radiance_pixels",
+           "prepare_scene",
            "window_pixels", "require_variant",
            "default_variant"]
 
@@ -100,6 +101,16 @@ def _setup(spec, *, spp, scale, max_bounces, thin_lens, laser_on, integrator, sa
     return scene, integ
 
 
+def prepare_scene(spec: SceneSpec, *, spp: int = 4, scale: float = 1.0, max_bounces: int = 2,
+                  thin_lens: bool = True, laser_on: bool = True, integrator: str = "laser",
+                  sampler: str = "multijitter"):
+    """The loaded scene and integrator of ``spec`` (see :func:`render_pixels`'s ``prepared``)."""
+    _check_args(spp, 0, scale, integrator, sampler)
+    require_variant()
+    return _setup(spec, spp=spp, scale=scale, max_bounces=max_bounces, thin_lens=thin_lens,
+                  laser_on=laser_on, integrator=integrator, sampler=sampler)
+
+
 def window_pixels(windows) -> np.ndarray:
     """(n, 2) int ``(x, y)`` of every pixel of the windows ``(x, y, width, height)``, window
     by window, row-major (the windows should not overlap: a shared pixel is listed twice)."""
@@ -110,7 +121,7 @@ def window_pixels(windows) -> np.ndarray:
 
 def render_pixels(spec: SceneSpec, pixels_xy, *, spp: int = 4, seed: int = 0, scale: float = 1.0,
                   max_bounces: int = 2, thin_lens: bool = True, laser_on: bool = True,
-                  integrator: str = "laser", sampler: str = "multijitter"
+                  integrator: str = "laser", sampler: str = "multijitter", prepared=None
                   ) -> tuple[np.ndarray, np.ndarray, float]:
     """Render only the listed pixels of the (scaled) film, ray for ray as :func:`render_radiance`.
 
@@ -131,6 +142,9 @@ def render_pixels(spec: SceneSpec, pixels_xy, *, spp: int = 4, seed: int = 0, sc
         ``[x − 0.5, x + 0.5) × [y − 0.5, y + 0.5)``), inside the film.
     spp, seed, scale, max_bounces, thin_lens, laser_on, integrator, sampler
         As :func:`render_radiance`.
+    prepared : (scene, integrator), optional
+        From :func:`prepare_scene` with the same arguments (then ``spec`` is not loaded
+        again): for many renders of one scene whose shapes move (``mi.traverse``).
 
     Returns
     -------
@@ -146,9 +160,9 @@ def render_pixels(spec: SceneSpec, pixels_xy, *, spp: int = 4, seed: int = 0, sc
     _check_args(spp, seed, scale, integrator, sampler)
     require_variant()
     px = np.asarray(pixels_xy, dtype=np.int64).reshape(-1, 2)
-    scene, integ = _setup(spec, spp=spp, scale=scale, max_bounces=max_bounces,
-                          thin_lens=thin_lens, laser_on=laser_on, integrator=integrator,
-                          sampler=sampler)
+    scene, integ = prepared if prepared is not None else _setup(
+        spec, spp=spp, scale=scale, max_bounces=max_bounces, thin_lens=thin_lens,
+        laser_on=laser_on, integrator=integrator, sampler=sampler)
     sensor = scene.sensors()[0]
     width, height = (int(c) for c in sensor.film().size())
     if np.any(px < 0) or np.any(px >= (width, height)):
