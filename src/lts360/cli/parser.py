@@ -102,6 +102,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--continuity-k", type=float, default=None, metavar="K",
                    help="flag points off their view's local r(θ) (running median ±2°) by more "
                         "than K robust σ (at least 15 µm) as DISCONTINUOUS (default: off)")
+    s.add_argument("--reject", choices=("on", "off"), default="on",
+                   help="truth-free rejection of spurious points (inverse method): FADING "
+                        "(within 0.5 mm of a stretch of a view's window where its line faded "
+                        "out) and NOTCH (the profile 80 µm below its chord at ±0.5/±1 mm: a "
+                        "notch the sheet does not resolve); default on")
     s.add_argument("--min-coverage", type=float, default=0.5,
                    help="refuse (exit 3) a section that measures less than this share of the "
                         "θ coverage its views predict (default 0.5); a section with no valid "
