@@ -220,6 +220,9 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--compensation-shots", type=int, default=1, metavar="K",
                    help="images of the gauge (turned between them) the §4.4 compensation is "
                    "fitted to (default 1, as the paper)")
+    q.add_argument("--placement-mm", type=float, default=0.3, metavar="R",
+                   help="placements drawn uniformly in a disc of radius R mm about the axis "
+                   "(default 0.3); results are also reported against the distance from it")
     q.set_defaults(func=cmd_study_plug_gauge)
 
     q = study_parser("monte-carlo", "GUM Supplement 1 Monte Carlo of the gauge radius, GUM "
@@ -238,6 +241,9 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--compensation-shots", type=int, default=1, metavar="K",
                    help="images of the reference placement each §4.4 compensation is fitted "
                    "to (default 1, as the paper)")
+    q.add_argument("--placement-mm", type=float, default=0.3, metavar="R",
+                   help="rendered placements drawn uniformly in a disc of radius R mm about the "
+                   "axis (default 0.3); results are also reported against the distance from it")
     q.add_argument("--rig", default="paper", help="rig to render: 'paper' or a TOML file (the "
                    "one the calibration is of)")
     q.set_defaults(func=cmd_study_monte_carlo)
