@@ -141,8 +141,19 @@ def _windows(n: int, half: int, periodic: bool) -> tuple[np.ndarray, np.ndarray]
 
 
 def _dilate(mask: np.ndarray, half: int, periodic: bool) -> np.ndarray:
-    k, inside = _windows(mask.size, half, periodic)
-    return np.any(mask[k] & inside, axis=1)
+    """Samples within ``half`` of a True sample (a running count by cumulative sums)."""
+    n = mask.size
+    if periodic:
+        h = min(half, n)
+        ext = np.concatenate([mask[n - h:], mask, mask[:h]]) if h else mask
+    else:
+        h = half
+        ext = np.concatenate([np.zeros(h, bool), mask, np.zeros(h, bool)])
+    c = np.concatenate([[0], np.cumsum(ext, dtype=np.int64)])
+    i = np.arange(n) + h
+    lo = np.clip(i - half, 0, ext.size)
+    hi = np.clip(i + half + 1, 0, ext.size)
+    return (c[hi] - c[lo]) > 0
 
 
 def fading_points(r_mm, window, theta_step_rad: float, *,
@@ -186,6 +197,16 @@ def fading_points(r_mm, window, theta_step_rad: float, *,
     return valid & _dilate(gap, m, periodic)
 
 
+def _nanmedian_rows(a: np.ndarray) -> np.ndarray:
+    """Median of each row's finite values (NaN where none); ``np.nanmedian`` by a sort."""
+    srt = np.sort(a, axis=1)  # NaN last
+    k = np.isfinite(a).sum(axis=1)
+    rows = np.arange(a.shape[0])
+    lo = srt[rows, np.maximum((k - 1) // 2, 0)]
+    hi = srt[rows, np.maximum(k // 2, 0)]
+    return np.where(k > 0, 0.5 * (lo + hi), np.nan)
+
+
 def section_profile(theta_rad, radii_mm, *, periodic: bool = True,
                     half: int = _PROFILE_HALF) -> np.ndarray:
     """(n,) the section's measured profile: per θ the median of the views' radii, then a
@@ -193,9 +214,9 @@ def section_profile(theta_rad, radii_mm, *, periodic: bool = True,
     R = np.atleast_2d(np.asarray(radii_mm, dtype=float))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        r = np.nanmedian(R, axis=0)
+        r = _nanmedian_rows(R.T)
         k, inside = _windows(r.size, half, periodic)
-        med = np.nanmedian(np.where(inside, r[k], np.nan), axis=1)
+        med = _nanmedian_rows(np.where(inside, r[k], np.nan))
         mean = np.nanmean(np.where(inside, med[k], np.nan), axis=1)
     return np.where(np.isfinite(r), mean, np.nan)
 
