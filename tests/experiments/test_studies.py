@@ -220,3 +220,23 @@ def test_a_calibration_rewritten_under_the_same_name_is_read_again(tmp_path, tru
     second = _plan(path, 10.0, 0.2, 1.0, 0.05)[0]
     np.testing.assert_allclose(second.view_offsets_mm["left"], [0.01, 0.0])
     assert _plan(path, 10.0, 0.2, 1.0, 0.05)[0] is second  # unchanged file: cached
+
+
+def test_gauge_results_against_the_distance_from_the_axis():
+    import xarray as xr
+
+    from lts360.experiments.gauge_study import by_offset, gauge_placements, placement_band_mm
+
+    off = np.array([0.1, 0.2, 1.1, 2.9, 3.0])
+    ds = xr.Dataset({"offset_mm": ("trial", off),
+                     "radius_error_mm": ("trial", np.array([-4, -4, -5, -6, -6]) * 1e-3),
+                     "view_mean_mm": (("trial", "view"), np.array([[-5, -3, -4]] * 5) * 1e-3)})
+    rows = by_offset(ds, bins=3)
+    assert [r["n"] for r in rows] == [2, 1, 2]
+    assert rows[-1]["mean_radius_error_mm"] == pytest.approx(-6e-3)
+    assert rows[0]["view_spread_mm"] == pytest.approx(2e-3)
+    assert placement_band_mm(0.3) == 1.0 and placement_band_mm(3.3) == pytest.approx(4.0)
+    specs = gauge_placements(50, 0, offset_mm=3.0)
+    r = [float(np.hypot(*[float(kv.split("=")[1]) for kv in s["spec"].split(",")[1:3]]))
+         for s in specs]
+    assert max(r) <= 3.0 and max(r) > 2.0

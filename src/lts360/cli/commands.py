@@ -255,14 +255,15 @@ def cmd_measure(args) -> int:
         cloud, grid, log = measure_sections_following(
             sections, cal, theta_step_deg=args.theta_step_deg, r_step_mm=args.r_step_mm,
             half_width_mm=args.band_mm, peak=args.peak, compensate=args.compensate,
-            backend=args.backend, progress=progress, continuity_k=args.continuity_k)
+            backend=args.backend, progress=progress, continuity_k=args.continuity_k,
+            reject=args.reject == "on")
         searched = log.describe()
     else:
         grid = CylGrid.from_ranges((radius - band_mm, radius + band_mm),
                                    theta_step_deg=args.theta_step_deg, r_step_mm=args.r_step_mm)
         cloud = measure_sections(sections, cal, grid, peak=args.peak, compensate=args.compensate,
                                  backend=args.backend, method=args.method, progress=progress,
-                                 continuity_k=args.continuity_k)
+                                 continuity_k=args.continuity_k, reject=args.reject == "on")
     dt = time.perf_counter() - t0
     coverages = section_coverage(cloud, grid, n_sections=len(sections),
                                  windows_in_cloud=args.method == "inverse")
@@ -348,9 +349,11 @@ def cmd_score(args) -> int:
           f"max |e| {fmt(metrics['max_abs_mm'])}, p95 {fmt(metrics['p95_mm'])}; normal distance "
           f"to the mesh: rms {fmt(metrics['mesh_distance']['rms_mm'])}")
     if metrics.get("rejected"):
+        n_valid = max(metrics["n_points"] + metrics.get("n_spurious", 0), 1)
         print("  rejected without the truth: " + ", ".join(
             f"{n} {k}" for k, n in metrics["rejected"].items()) + (
-            f"; {metrics.get('n_spurious', 0)} spurious still valid (truth-aware)"
+            f"; {metrics.get('n_spurious', 0)} spurious still valid (truth-aware, "
+            f"{100 * metrics.get('n_spurious', 0) / n_valid:.2f} % of the valid points)"
             if "n_spurious" in metrics else ""))
     if metrics.get("n_spurious"):
         print(f"  {metrics['n_spurious']} spurious points where the true surface is hidden or "

@@ -119,6 +119,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--continuity-k", type=float, default=None, metavar="K",
                    help="flag points off their view's local r(θ) (running median ±2°) by more "
                         "than K robust σ (at least 15 µm) as DISCONTINUOUS (default: off)")
+    s.add_argument("--reject", choices=("on", "off"), default="on",
+                   help="truth-free rejection of spurious points (inverse method): FADING "
+                        "(within 0.5 mm of a stretch of a view's window where its line faded "
+                        "out) and NOTCH (the profile 80 µm below its chord at ±0.5/±1 mm: a "
+                        "notch the sheet does not resolve); default on")
     s.add_argument("--min-coverage", type=float, default=0.5,
                    help="refuse (exit 3) a section that measures less than this share of the "
                         "θ coverage its views predict (default 0.5); a section with no valid "
@@ -232,6 +237,9 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--compensation-shots", type=int, default=1, metavar="K",
                    help="images of the gauge (turned between them) the §4.4 compensation is "
                    "fitted to (default 1, as the paper)")
+    q.add_argument("--placement-mm", type=float, default=0.3, metavar="R",
+                   help="placements drawn uniformly in a disc of radius R mm about the axis "
+                   "(default 0.3); results are also reported against the distance from it")
     q.set_defaults(func=cmd_study_plug_gauge)
 
     q = study_parser("monte-carlo", "GUM Supplement 1 Monte Carlo of the gauge radius, GUM "
@@ -250,6 +258,9 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--compensation-shots", type=int, default=1, metavar="K",
                    help="images of the reference placement each §4.4 compensation is fitted "
                    "to (default 1, as the paper)")
+    q.add_argument("--placement-mm", type=float, default=0.3, metavar="R",
+                   help="rendered placements drawn uniformly in a disc of radius R mm about the "
+                   "axis (default 0.3); results are also reported against the distance from it")
     q.add_argument("--rig", default="paper", help="rig to render: 'paper' or a TOML file (the "
                    "one the calibration is of)")
     q.set_defaults(func=cmd_study_monte_carlo)

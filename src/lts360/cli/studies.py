@@ -47,6 +47,11 @@ def _check_shots(shots: int) -> None:
         raise UsageError(f"--compensation-shots: must be in [1, 100], got {shots}")
 
 
+def _check_placement(placement_mm: float) -> None:
+    if not 0 <= placement_mm <= 10:
+        raise UsageError(f"--placement-mm: must be in [0, 10], got {placement_mm}")
+
+
 def cmd_study_plug_gauge(args) -> int:
     from lts360.experiments.gauge_study import format_gauge_table, run_plug_gauge_study
 
@@ -54,12 +59,14 @@ def cmd_study_plug_gauge(args) -> int:
     if not 1 <= args.trials <= 10000:
         raise UsageError(f"--trials: must be in [1, 10000], got {args.trials}")
     _check_shots(args.compensation_shots)
+    _check_placement(args.placement_mm)
     _optional_file(args.calibration, "--calibration")
     _study_rig(args.rig)
     _set_variant(args.variant)
     table = run_plug_gauge_study(args.out, trials=args.trials, calibration=args.calibration,
                                  noise=args.noise, spp=args.spp, rig=args.rig,
                                  compensation_shots=args.compensation_shots,
+                                 placement_mm=args.placement_mm,
                                  workers=args.workers or 1, **common)
     print(format_gauge_table(table))
     print(f"wrote {args.out}/ (table.txt, table.json, plug-gauge.png, trials/results.nc)")
@@ -80,6 +87,7 @@ def cmd_study_monte_carlo(args) -> int:
     if not 1 <= args.digits <= 4:
         raise UsageError(f"--digits: must be in [1, 4], got {args.digits}")
     _check_shots(args.compensation_shots)
+    _check_placement(args.placement_mm)
     _optional_file(args.calibration, "--calibration")
     _study_rig(args.rig)
     _set_variant(args.variant)
@@ -93,7 +101,8 @@ def cmd_study_monte_carlo(args) -> int:
                                     compensation_shots=args.compensation_shots,
                                     adaptive=args.adaptive, batch=args.batch, n_dig=args.digits,
                                     sensitivity_trials=args.sensitivity_trials,
-                                    placements=args.placements, workers=args.workers, **common)
+                                    placements=args.placements, placement_mm=args.placement_mm,
+                                    workers=args.workers, **common)
     print(format_mc(summary))
     print(f"wrote {out}/ (summary.json, monte-carlo.png, mc/batch_*/results.nc)")
     return 0

@@ -27,7 +27,8 @@ import numpy as np
 
 from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study
 
-__all__ = ["GAUGE_DIAMETER_MM", "PAPER_TABLE", "gauge_placements", "plug_gauge_trial",
+__all__ = ["GAUGE_DIAMETER_MM", "DEFAULT_PLACEMENT_MM", "placement_band_mm", "by_offset",
+           "PAPER_TABLE", "gauge_placements", "plug_gauge_trial",
            "gauge_table", "run_plug_gauge_study", "measure_gauge_image", "format_gauge_table",
            "ensure_calibration"]
 
@@ -41,9 +42,48 @@ STEEL_ALPHA_PER_K = 11.5e-6
 DELTA_T_K = 5.0
 RESOLUTION_MM = 0.001
 VIEWS = ("direct", "left", "right")
+#: Radius (mm) of the disc the gauge's placements are drawn in (a V-block put back by hand).
+DEFAULT_PLACEMENT_MM = 0.3
 
 
-def gauge_placements(n: int, seed: int, *, offset_mm: float = 0.3, tilt_deg: float = 0.3,
+def placement_band_mm(placement_mm: float) -> float:
+    """Half-width of the fixed radial band about the gauge's radius that holds every placement
+    within ``placement_mm`` of the axis: ±1 mm about the true radius at the nominal
+    ``DEFAULT_PLACEMENT_MM``, widened by the placement beyond it."""
+    if not 0 <= placement_mm <= 20:
+        raise ValueError(f"placement_mm must be in [0, 20], got {placement_mm}")
+    return 1.0 + max(0.0, float(placement_mm) - DEFAULT_PLACEMENT_MM)
+
+
+def by_offset(ds, *, bins: int = 4) -> list[dict]:
+    """Results against the gauge's distance from the axis (``offset_mm`` of each trial):
+    per bin of equal width up to the largest offset, the trials, the mean radius error and the
+    spread of the per-view mean errors (largest minus smallest, mean over the trials)."""
+    if "offset_mm" not in ds:
+        return []
+    off = np.asarray(ds["offset_mm"].values, float)
+    err = np.asarray(ds["radius_error_mm"].values, float)
+    spread = np.full(off.size, np.nan)
+    if "view_mean_mm" in ds:
+        vm = np.asarray(ds["view_mean_mm"].values, float)
+        with np.errstate(all="ignore"):
+            spread = np.nanmax(vm, axis=1) - np.nanmin(vm, axis=1)
+    hi = float(np.nanmax(off)) if off.size else 0.0
+    edges = np.linspace(0.0, hi if hi > 0 else 1.0, bins + 1)
+    rows = []
+    for k in range(bins):
+        m = (off >= edges[k]) & ((off < edges[k + 1]) if k < bins - 1 else (off <= edges[k + 1]))
+        if not m.any():
+            continue
+        rows.append({"offset_from_mm": float(edges[k]), "offset_to_mm": float(edges[k + 1]),
+                     "n": int(m.sum()), "mean_radius_error_mm": float(np.nanmean(err[m])),
+                     "view_spread_mm": float(np.nanmean(spread[m]))
+                     if np.isfinite(spread[m]).any() else None})
+    return rows
+
+
+def gauge_placements(n: int, seed: int, *, offset_mm: float = DEFAULT_PLACEMENT_MM,
+                     tilt_deg: float = 0.3,
                      diameter_mm: float = GAUGE_DIAMETER_MM) -> list[dict]:
     """Trial parameters: the gauge put in its V-block ``n`` times.
 
@@ -174,13 +214,15 @@ def plug_gauge_trial(trial: Trial) -> TrialOutput:
         mi.set_variant(p.get("variant", "llvm_ad_mono"))
     obj = build_object(p["spec"])
     r_mm = obj.params["diameter_mm"] / 2
+    band = placement_band_mm(float(p.get("placement_mm", DEFAULT_PLACEMENT_MM)))
     # Only the pixels the measurement reads are rendered (the rest of the image is not used).
     frame = simulate_frame(load_rig(p["rig"]), obj, spp=int(p["spp"]), seed=trial.seed,
                            noise=p["noise"],
-                           pixels_xy=gauge_window_pixels(p["calibration"], r_mm))
+                           pixels_xy=gauge_window_pixels(p["calibration"], r_mm, band_mm=band))
     cloud = Path(p["clouds"]) / f"placement_{trial.index:02d}.ply" if p.get("clouds") else None
-    m = measure_gauge_image(frame.image, p["calibration"], r_true_mm=r_mm,
+    m = measure_gauge_image(frame.image, p["calibration"], r_true_mm=r_mm, band_mm=band,
                             compensate=bool(p["compensate"]), cloud_path=cloud)
+    m["offset_mm"] = float(np.hypot(obj.placement.x_mm, obj.placement.y_mm))
     arrays = {k: m.pop(k) for k in ("view_mean_mm", "view_std_mm", "view_n") if k in m}
     values = {k: float(v) for k, v in m.items()}
     values.update(arrays)
@@ -210,7 +252,8 @@ def gauge_table(ds) -> dict:
             "std_of_radius_error_mm": float(np.nanstd(err, ddof=1)) if err.size > 1 else None,
             "worst_std_mm": s_worst, "temperature_mm": temp_mm, "resolution_mm": RESOLUTION_MM,
             "expanded_uncertainty_mm": U, "max_error_mm": abs(mean) + U,
-            "mean_coverage_deg": float(np.nanmean(ds["coverage_deg"].values))}
+            "mean_coverage_deg": float(np.nanmean(ds["coverage_deg"].values)),
+            "by_offset": by_offset(ds)}
 
 
 def format_gauge_table(ours: dict) -> str:
@@ -228,6 +271,13 @@ def format_gauge_table(ours: dict) -> str:
                      f"{ours['probing_form_PF_mm']:9.4f}")
         lines.append(f"{'VDI/VDE 2634-2: probing size P_S (worst)':38s} {'—':>9s} "
                      f"{ours['probing_size_PS_mm']:+9.4f}")
+    if ours.get("by_offset"):
+        lines.append("against the distance from the axis (mm): placements, mean radius error, "
+                     "spread of the views' mean errors")
+        for b in ours["by_offset"]:
+            spread = "—" if b["view_spread_mm"] is None else f"{b['view_spread_mm'] * 1e3:.1f} µm"
+            lines.append(f"  {b['offset_from_mm']:.2f}–{b['offset_to_mm']:.2f}: {b['n']:4d}  "
+                         f"{b['mean_radius_error_mm'] * 1e3:+7.1f} µm  {spread}")
     lines.append(f"(ours: {ours['n_measurements']} placements, mean coverage "
                  f"{ours['mean_coverage_deg']:.1f}°; the paper's temperature term is its own "
                  "figure, ours is α·d·ΔT for steel)")
@@ -303,16 +353,20 @@ def run_plug_gauge_study(out_dir, *, trials: int = 10, seed: int = 0, calibratio
                          noise: str = "realistic", spp: int = 16, rig: str = "paper",
                          compensate: bool = True, workers: int | None = 1,
                          dask_address: str | None = None, calibrate_options: dict | None = None,
-                         compensation_shots: int = 1, say=print) -> dict:
-    """Calibrate (unless ``calibration``), compensate, measure ``trials`` placements, tabulate."""
+                         compensation_shots: int = 1, placement_mm: float = DEFAULT_PLACEMENT_MM,
+                         say=print) -> dict:
+    """Calibrate (unless ``calibration``), compensate, measure ``trials`` placements (offsets
+    drawn in a disc of radius ``placement_mm``), tabulate (also against the offset)."""
+    placement_band_mm(placement_mm)  # validates
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     calibration = ensure_calibration(out, calibration, rig=rig, noise=noise, seed=seed, spp=spp,
                                      compensate=compensate, calibrate_options=calibrate_options,
                                      compensation_shots=compensation_shots, say=say)
     params = [dict(p, calibration=str(calibration.resolve()), noise=noise, spp=spp, rig=rig,
-                   compensate=compensate, clouds=str((out / "clouds").resolve()))
-              for p in gauge_placements(trials, seed)]
+                   compensate=compensate, clouds=str((out / "clouds").resolve()),
+                   placement_mm=float(placement_mm))
+              for p in gauge_placements(trials, seed, offset_mm=placement_mm)]
     ds = run_study(out / "trials", plan_trials(params, seed), plug_gauge_trial, name="plug-gauge",
                    workers=workers, dask_address=dask_address,
                    attrs={"noise": noise, "spp": spp, "rig": rig})

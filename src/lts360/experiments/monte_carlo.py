@@ -67,8 +67,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lts360.experiments.gauge_study import (DELTA_T_K, GAUGE_DIAMETER_MM, STEEL_ALPHA_PER_K,
-                                            gauge_placements)
+from lts360.experiments.gauge_study import (DEFAULT_PLACEMENT_MM, DELTA_T_K, GAUGE_DIAMETER_MM,
+                                            STEEL_ALPHA_PER_K, gauge_placements)
 from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study
 
 __all__ = ["INPUTS", "mc_trial", "run_monte_carlo_study", "coverage_interval",
@@ -142,7 +142,8 @@ def _calibration(path: str):
 
 
 def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
-                noise_seed: int | None = None, shots: int = 1):
+                noise_seed: int | None = None, shots: int = 1,
+                placement_mm: float = DEFAULT_PLACEMENT_MM):
     """``cal`` with the §4.4 view offsets measured with it on the reference placement
     (``placement_00``), whatever offsets ``cal`` held.  The reference image is noise-free, or
     with ``noise_seed`` has realistic sensor noise and a speckle pattern drawn from it; then
@@ -165,28 +166,44 @@ def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
         ref, _, _ = sensor_image(rig, SimpleNamespace(radiance_W_m2_sr=Y0, laser_W_m2_sr=L0),
                                  noise="realistic" if noisy else "none", seed=s, speckle=noisy,
                                  speckle_seed=s + 1 if noisy else None)
-        results.append(inverse_triangulate(ref, cal, _grid(theta_step_deg)))
+        results.append(inverse_triangulate(ref, cal, _grid(theta_step_deg, placement_mm)))
     offsets = joint_view_offsets(results)
     return dataclasses.replace(cal, view_offsets_mm=offsets)
 
 
 @functools.lru_cache(maxsize=2)
-def _nominal_calibration(path: str, renders: str, rig_name: str, theta_step_deg: float):
+def _nominal_calibration(path: str, renders: str, rig_name: str, theta_step_deg: float,
+                         placement_mm: float = DEFAULT_PLACEMENT_MM):
     """The file's calibration compensated at the reference placement (once per process)."""
-    return _compensate(_calibration(path), renders, rig_name, theta_step_deg)
+    return _compensate(_calibration(path), renders, rig_name, theta_step_deg,
+                       placement_mm=placement_mm)
 
 
-def _grid(theta_step_deg: float):
+def _grid(theta_step_deg: float, placement_mm: float = DEFAULT_PLACEMENT_MM):
+    """The fixed band about the gauge's radius: ±0.5 mm at the nominal placements, widened by
+    the placement radius beyond them."""
     from lts360.recon.triangulation.grid import CylGrid
 
     r0 = GAUGE_DIAMETER_MM / 2.0
-    return CylGrid.from_ranges((r0 - 0.5, r0 + 0.5), theta_step_deg=theta_step_deg,
+    half = 0.5 + max(0.0, float(placement_mm) - DEFAULT_PLACEMENT_MM)
+    return CylGrid.from_ranges((r0 - half, r0 + half), theta_step_deg=theta_step_deg,
                                r_step_mm=0.005)
+
+
+@functools.lru_cache(maxsize=64)
+def _offset_mm(frame_dir: str) -> float:
+    """Distance of a rendered placement's axis from the rig's axis (from its frame.json)."""
+    from lts360.scenes.objects import build_object
+
+    meta = json.loads((Path(frame_dir) / "frame.json").read_text())
+    pl = build_object(meta["object"]["spec"]).placement
+    return float(math.hypot(pl.x_mm, pl.y_mm))
 
 
 @functools.lru_cache(maxsize=16)
 def _nominal_radii(frame_dir: str, cal_path: str, renders: str, rig_name: str,
-                   theta_step_deg: float, compensate: bool = True) -> dict:
+                   theta_step_deg: float, compensate: bool = True,
+                   placement_mm: float = DEFAULT_PLACEMENT_MM) -> dict:
     """Per-view radii of a placement without noise or speckle (the speckle run's reference)."""
     from types import SimpleNamespace
 
@@ -197,9 +214,10 @@ def _nominal_radii(frame_dir: str, cal_path: str, renders: str, rig_name: str,
     Y, L, _ = _placement(frame_dir)
     img, _, _ = sensor_image(load_rig(rig_name), SimpleNamespace(radiance_W_m2_sr=Y,
                                                                   laser_W_m2_sr=L), noise="none")
-    cal = (_nominal_calibration(cal_path, renders, rig_name, theta_step_deg) if compensate
-           else dataclasses.replace(_calibration(cal_path), view_offsets_mm={}))
-    res = inverse_triangulate(img, cal, _grid(theta_step_deg), compensate=compensate)
+    cal = (_nominal_calibration(cal_path, renders, rig_name, theta_step_deg, placement_mm)
+           if compensate else dataclasses.replace(_calibration(cal_path), view_offsets_mm={}))
+    res = inverse_triangulate(img, cal, _grid(theta_step_deg, placement_mm),
+                              compensate=compensate)
     return {n: v.r_mm for n, v in res.views.items()}
 
 
@@ -215,6 +233,7 @@ def mc_trial(trial: Trial) -> TrialOutput:
     from lts360.simulator.frame import sensor_image
 
     p = trial.params
+    pl_mm = float(p.get("placement_mm", DEFAULT_PLACEMENT_MM))
     vary = set(INPUTS) if p["vary"] == "all" else {p["vary"]}
     rng = np.random.default_rng(trial.seed)
     seeds = rng.integers(0, 2**31, size=5)
@@ -240,14 +259,17 @@ def mc_trial(trial: Trial) -> TrialOutput:
             cal = sample_calibration(cal, np.random.default_rng(seeds[2]))
         cal = _compensate(cal, p["renders"], p["rig"], step,
                           noise_seed=int(seeds[4]) if "compensation" in vary else None,
-                          shots=int(p.get("compensation_shots", 1)))
+                          shots=int(p.get("compensation_shots", 1)), placement_mm=pl_mm)
     else:  # the same procedure, once
-        cal = _nominal_calibration(p["calibration"], p["renders"], p["rig"], step)
-    out = inverse_triangulate(image, cal, _grid(step), compensate=bool(cal.view_offsets_mm))
+        cal = _nominal_calibration(p["calibration"], p["renders"], p["rig"], step, pl_mm)
+    grid = _grid(step, pl_mm)
+    out = inverse_triangulate(image, cal, grid, compensate=bool(cal.view_offsets_mm))
+    offset = _offset_mm(str(Path(p["renders"]) / f"placement_{k:02d}"))
     extra = {}
     if p["vary"] == "speckle":  # per-point scatter caused by speckle alone (vs. no speckle)
         nominal = _nominal_radii(str(Path(p["renders"]) / f"placement_{k:02d}"), p["calibration"],
-                                 p["renders"], p["rig"], step, bool(p.get("compensate", True)))
+                                 p["renders"], p["rig"], step, bool(p.get("compensate", True)),
+                                 pl_mm)
         diffs = np.concatenate([out.views[n].r_mm - nominal[n] for n in out.views])
         extra["speckle_point_std_um"] = float(np.nanstd(diffs) * 1e3)
     pts = np.concatenate([v.points_meas_mm[v.valid, :2] for v in out.views.values()])
@@ -255,26 +277,28 @@ def mc_trial(trial: Trial) -> TrialOutput:
         if "temperature" in vary else 0.0
     if len(pts) < 10:
         return TrialOutput(values={"y_um": np.nan, "point_std_um": np.nan, "n_points": 0,
-                                   "placement": k, "delta_T_K": dT})
+                                   "placement": k, "delta_T_K": dT, "offset_mm": offset})
     fit = fit_circle(pts)
     r = np.hypot(*(pts - fit.center_mm).T)
     y = (fit.radius_mm - r0) * 1e3 + STEEL_ALPHA_PER_K * r0 * dT * 1e3
     return TrialOutput(values={"y_um": float(y), "point_std_um": float(r.std() * 1e3),
                                "n_points": int(len(pts)), "placement": k, "delta_T_K": dT,
-                               **extra})
+                               "offset_mm": offset, **extra})
 
 
-def _render_placements(out: Path, n: int, *, rig: str, seed: int, spp: int, say) -> Path:
+def _render_placements(out: Path, n: int, *, rig: str, seed: int, spp: int, say,
+                       placement_mm: float = DEFAULT_PLACEMENT_MM) -> Path:
     import mitsuba as mi
 
     from lts360.scenes.objects import build_object
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import simulate_frame, write_frame
 
-    root = out / "renders"
+    root = out / ("renders" if placement_mm == DEFAULT_PLACEMENT_MM
+                  else f"renders-{placement_mm:g}mm")
     if mi.variant() is None:
         mi.set_variant("llvm_ad_mono")
-    for k, params in enumerate(gauge_placements(n, seed)):
+    for k, params in enumerate(gauge_placements(n, seed, offset_mm=placement_mm)):
         d = root / f"placement_{k:02d}"
         if (d / "frame.json").is_file():
             continue
@@ -313,8 +337,14 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
                           placements: int = 8, seed: int = 0, rig: str = "paper", spp: int = 16,
                           theta_step_deg: float = 0.5, workers: int | None = None,
                           dask_address: str | None = None, compensate: bool = True,
-                          compensation_shots: int = 1, say=print) -> dict:
+                          compensation_shots: int = 1,
+                          placement_mm: float = DEFAULT_PLACEMENT_MM, say=print) -> dict:
     """Run the study (see the module docstring); returns the summary written to summary.json.
+
+    ``placement_mm``: the placements are drawn in a disc of that radius about the axis (their
+    renders kept in ``renders/``, or ``renders-Rmm/`` for another radius); the summary's
+    ``by_offset`` gives the trials' mean result per placement against its distance from the
+    axis.
 
     ``compensate=False``: every trial measures without the §4.4 compensation (the view
     offsets of ``calibration`` are ignored) and the ``compensation`` input is left out.
@@ -325,9 +355,13 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
         raise ValueError(f"compensation_shots must be in [1, 100], got {compensation_shots}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    renders = _render_placements(out, placements, rig=rig, seed=seed, spp=spp, say=say)
+    if not 0 <= placement_mm <= 10:
+        raise ValueError(f"placement_mm must be in [0, 10], got {placement_mm}")
+    renders = _render_placements(out, placements, rig=rig, seed=seed, spp=spp, say=say,
+                                 placement_mm=float(placement_mm))
     base = {"calibration": str(Path(calibration).resolve()), "renders": str(renders.resolve()),
             "placements": placements, "rig": rig, "theta_step_deg": theta_step_deg,
+            "placement_mm": float(placement_mm),
             "compensate": bool(compensate), "compensation_shots": int(compensation_shots)}
     if workers is None and dask_address is None:
         workers = 2
@@ -357,9 +391,35 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
     sp = xr.open_dataset(out / "only-speckle" / "batch_000" / "results.nc")
     summary["speckle_point_std_um"] = float(np.nanmean(sp["speckle_point_std_um"].values))
     sp.close()
+    summary["placement_mm"] = float(placement_mm)
+    summary["by_offset"] = _by_offset(sorted((out / "mc").glob("batch_*/results.nc")))
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     _plot(y, summary, out / "monte-carlo.png")
     return summary
+
+
+def _by_offset(paths) -> list[dict]:
+    """Per rendered placement of the full Monte Carlo: its distance from the axis, the trials
+    that drew it and their mean and standard deviation of y (µm), by increasing distance."""
+    import xarray as xr
+
+    off, yy = [], []
+    for path in paths:
+        with xr.open_dataset(path) as ds:
+            if "offset_mm" not in ds:
+                return []
+            off.append(np.asarray(ds["offset_mm"].values, float))
+            yy.append(np.asarray(ds["y_um"].values, float))
+    if not off:
+        return []
+    off, yy = np.concatenate(off), np.concatenate(yy)
+    rows = []
+    for o in np.unique(np.round(off, 6)):
+        m = np.isclose(off, o, atol=1e-6) & np.isfinite(yy)
+        if m.any():
+            rows.append({"offset_mm": float(o), "n": int(m.sum()), "mean_um": float(yy[m].mean()),
+                         "std_um": float(yy[m].std(ddof=1)) if m.sum() > 1 else None})
+    return rows
 
 
 def _plot(y, summary, path: Path) -> None:
@@ -399,6 +459,11 @@ def format_mc(s: dict) -> str:
         b = s["budget"][name]
         lines.append(f"  {name:14s} u_i = {b['u_um']:7.2f} µm  (mean {b['mean_um']:+.2f}, M = {b['M']})")
     d = s["dorsch"]
+    if s.get("by_offset"):
+        lines.append(f"against the distance from the axis (placements within "
+                     f"{s.get('placement_mm', DEFAULT_PLACEMENT_MM):g} mm): offset, trials, mean y")
+        for b in s["by_offset"]:
+            lines.append(f"  {b['offset_mm']:.3f} mm  {b['n']:5d}  {b['mean_um']:+7.2f} µm")
     lines.append(f"speckle limit (Dorsch et al. 1994), per point: δz = {d['delta_z_um']:.1f} µm "
                  f"(C = {d['contrast']:.3f}, sin u = {d['sin_u_obs']:.4f}, θ = "
                  f"{d['triangulation_deg']:.0f}°); simulated speckle-only point scatter "

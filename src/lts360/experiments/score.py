@@ -20,7 +20,7 @@ import numpy as np
 
 from lts360.geometry.fit import fit_circle
 from lts360.recon.triangulation.cloud import VIEW_NAMES, Cloud
-from lts360.recon.triangulation.peaks import Quality
+from lts360.recon.triangulation.reject import rejection_counts
 from lts360.scenes.objects import SceneObject, build_object
 
 __all__ = ["load_truth", "load_rig_truth", "signed_mesh_distance", "score_cloud", "error_stats",
@@ -181,10 +181,7 @@ def score_cloud(cloud: Cloud, obj: SceneObject, *, theta_bin_deg: float = 0.5,
     valid = cloud.valid
     # Rows rejected by a truth-free criterion of the measurement (quality flags), beside the
     # truth-aware "spurious" count below.
-    rejected = {"continuity": int(np.sum(np.asarray(cloud.quality) == Quality.DISCONTINUOUS)),
-                "truncated": int(np.sum(np.asarray(cloud.quality) == Quality.TRUNCATED)),
-                "saturated_plateau": int(np.sum(np.asarray(cloud.quality)
-                                                == Quality.SATURATED_PLATEAU))}
+    rejected = rejection_counts(cloud.quality)
     c = cloud.select(valid)
     pts = c.points_mm
     analytic = obj.radial_error(pts) if obj.radius_fn is not None else np.full(len(pts), np.nan)

@@ -16,7 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["VIEW_CODES", "VIEW_NAMES", "Cloud", "write_cloud", "read_cloud"]
+__all__ = ["VIEW_CODES", "VIEW_NAMES", "Cloud", "write_cloud", "read_cloud",
+           "read_cloud_rejections"]
 
 VIEW_CODES = {"direct": 0, "left": 1, "right": 2, "left-right": 3, "right-left": 4, "fused": 9}
 VIEW_NAMES = {v: k for k, v in VIEW_CODES.items()}
@@ -96,8 +97,15 @@ class Cloud:
                      time_s=times)
 
 
-def write_cloud(path, cloud: Cloud) -> Path:
-    """Binary PLY with the attributes above (written to a temporary name, then renamed)."""
+def write_cloud(path, cloud: Cloud, *, comments=()) -> Path:
+    """Binary PLY with the attributes above (written to a temporary name, then renamed).
+
+    The header carries the count of each truth-free rejection
+    (``comment lts360 rejected NAME COUNT``; the names of
+    :data:`lts360.recon.triangulation.reject.REJECTION_CODES`) and any further
+    ``comments`` (one ASCII line each)."""
+    from lts360.recon.triangulation.reject import rejection_counts
+
     path = Path(path)
     n = len(cloud)
     fields = _FIELDS + ((_TIME,) if cloud.time_s is not None else ())
@@ -108,8 +116,15 @@ def write_cloud(path, cloud: Cloud) -> Path:
     rec["section"], rec["intensity"] = cloud.section, cloud.intensity
     if cloud.time_s is not None:
         rec["time"] = cloud.time_s
+    extra = [f"comment lts360 rejected {k} {v}" for k, v in
+             rejection_counts(cloud.quality).items()]
+    for c in comments:
+        if "\n" in str(c) or not str(c).isascii():
+            raise ValueError(f"comments: one ASCII line each, got {c!r}")
+        extra.append(f"comment {c}")
     header = ["ply", "format binary_little_endian 1.0", "comment lts360 measured cloud, mm",
-              f"element vertex {n}"] + [f"property {ply} {name}" for name, _, ply in fields]
+              *extra, f"element vertex {n}"]
+    header += [f"property {ply} {name}" for name, _, ply in fields]
     header.append("end_header")
     tmp = path.with_name(f".{path.name}.tmp")
     with open(tmp, "wb") as f:
@@ -117,6 +132,19 @@ def write_cloud(path, cloud: Cloud) -> Path:
         f.write(rec.tobytes())
     os.replace(tmp, path)
     return path
+
+
+def read_cloud_rejections(path) -> dict[str, int]:
+    """The rejection counts a cloud's header carries (``{}`` for a cloud written without)."""
+    with open(path, "rb") as f:
+        head = f.read(4096)
+    end = head.find(b"end_header")
+    out = {}
+    for line in head[:end if end >= 0 else None].decode("ascii", "replace").splitlines():
+        parts = line.split()
+        if parts[:3] == ["comment", "lts360", "rejected"] and len(parts) == 5:
+            out[parts[3]] = int(parts[4])
+    return out
 
 
 def read_cloud(path) -> Cloud:

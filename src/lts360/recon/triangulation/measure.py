@@ -161,7 +161,8 @@ def classic_to_cloud(res: dict, *, z_mm: float, section: int) -> Cloud:
 
 
 def make_runner(cal: Calibration, *, peak: str = "centroid", backend: str = "auto",
-                compensate: bool = False, continuity_k: float | None = None):
+                compensate: bool = False, continuity_k: float | None = None,
+                reject: bool = False):
     """A function ``plan -> (image -> InverseResult)`` on the chosen backend.
 
     ``backend``: ``numpy`` (the reference), ``llvm`` or ``cuda`` (the Dr.Jit kernel of the
@@ -170,7 +171,24 @@ def make_runner(cal: Calibration, *, peak: str = "centroid", backend: str = "aut
     (``precompute=False``); the numpy path adds them.  ``continuity_k``: flag points off
     their view's local r(θ) by more than k·σ
     (:func:`lts360.recon.triangulation.reject.reject_discontinuous`; ``None``: off).
+    ``reject``: flag fading points and points in notches
+    (:func:`lts360.recon.triangulation.reject.reject_spurious`), before the continuity test.
     """
+    if reject:
+        from lts360.recon.triangulation.reject import reject_discontinuous, reject_spurious
+
+        if continuity_k is not None and not continuity_k > 0:
+            raise ValueError(f"continuity_k must be > 0, got {continuity_k}")
+        inner = make_runner(cal, peak=peak, backend=backend, compensate=compensate)
+
+        def build(plan):
+            m = inner(plan)
+
+            def measure(img):
+                res = reject_spurious(m(img))
+                return res if continuity_k is None else reject_discontinuous(res, k=continuity_k)
+            return measure
+        return build
     if continuity_k is not None:
         from lts360.recon.triangulation.reject import reject_discontinuous
 
@@ -214,7 +232,7 @@ def make_runner(cal: Calibration, *, peak: str = "centroid", backend: str = "aut
 def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *,
                      peak: str = "centroid", compensate: bool = False, backend: str = "auto",
                      method: str = "inverse", progress=None,
-                     continuity_k: float | None = None) -> Cloud:
+                     continuity_k: float | None = None, reject: bool = False) -> Cloud:
     """Inverse triangulation of every section with one plan (a band given by the user).
 
     ``backend``: see :func:`make_runner`.
@@ -231,7 +249,7 @@ def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *
     if method != "inverse":
         raise ValueError(f"method must be 'inverse' or 'classic', got {method!r}")
     measure = make_runner(cal, peak=peak, backend=backend, compensate=compensate,
-                          continuity_k=continuity_k)(
+                          continuity_k=continuity_k, reject=reject)(
         plan_inverse(cal, grid, precompute=False))
     clouds = []
     items = list(enumerate(sections))
@@ -294,8 +312,8 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
                                r_step_mm: float = DEFAULT_R_STEP_MM,
                                half_width_mm: float | None = None, peak: str = "centroid",
                                compensate: bool = False, backend: str = "auto",
-                               progress=None, continuity_k: float | None = None
-                               ) -> tuple[Cloud, CylGrid, BandLog]:
+                               progress=None, continuity_k: float | None = None,
+                               reject: bool = False) -> tuple[Cloud, CylGrid, BandLog]:
     """Inverse triangulation with the radial band found from the image.
 
     The first section runs the coarse pass (:class:`lts360.recon.triangulation.band.BandSearch`) and
@@ -321,7 +339,7 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
     if not w > 0:
         raise ValueError(f"half_width_mm must be > 0, got {half_width_mm}")
     runner = make_runner(cal, peak=peak, backend=backend, compensate=compensate,
-                         continuity_k=continuity_k)
+                         continuity_k=continuity_k, reject=reject)
     t0 = time.perf_counter()
     search = BandSearch(cal, make_runner(cal, peak=peak, backend=backend))
     log = BandLog(coarse=search.describe(), half_width_mm=w, plan_s=time.perf_counter() - t0)

@@ -81,6 +81,15 @@ class Quality(IntEnum):
     #: Set by :mod:`lts360.recon.triangulation.reject`: off a robust local fit of the view's
     #: r(θ) by more than k·σ (truth-free rejection of a spurious point).
     DISCONTINUOUS = 7
+    #: Set by :mod:`lts360.recon.triangulation.reject`: the section's measured profile dips
+    #: below its chord here (a notch narrower than the sheet and the camera resolve: a cable's
+    #: valley, whose bottom is hidden or shaded; the detector sees the flanks' sheet tails).
+    NOTCH = 8
+    #: Set by :mod:`lts360.recon.triangulation.reject`: within a stated arc of a stretch of the
+    #: view's own window where its line faded out (no valid peak): the surface turns away from
+    #: the camera or into the laser's shadow there, and the last points before it lie on the
+    #: sheet's tail.
+    FADING = 9
 
 
 @dataclass(frozen=True, eq=False)

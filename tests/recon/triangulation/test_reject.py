@@ -1,0 +1,123 @@
+"""Truth-free rejection (lts360.recon.triangulation.reject) on synthetic profiles made for each
+criterion: a line that fades inside its window, a notch, a round section off the axis."""
+
+import numpy as np
+import pytest
+
+from lts360.recon.triangulation.reject import (fading_points, notch_depth, rejection_counts,
+                                               section_profile)
+
+TH = np.radians(np.arange(-180.0, 180.0, 0.1))
+STEP = np.radians(0.1)
+
+
+def _circle(r, x0=0.0, y0=0.0):
+    """Radius along each θ ray of a circle of radius r centred at (x0, y0)."""
+    c, s = np.cos(TH), np.sin(TH)
+    b = x0 * c + y0 * s
+    return b + np.sqrt(b * b - (x0 * x0 + y0 * y0 - r * r))
+
+
+def test_fading_points_flank_a_faded_stretch_inside_the_window():
+    r = np.full(TH.size, 10.0)
+    window = np.zeros(TH.size, bool)
+    window[1000:2000] = True
+    r[~window] = np.nan
+    r[1500:1530] = np.nan  # 3° faded (0.52 mm at r = 10 mm)
+    out = fading_points(r, window, STEP, margin_mm=0.5, gap_mm=0.3)
+    k = int(round(0.5 / (10.0 * STEP)))
+    assert out[1500 - k:1500].all() and out[1530:1530 + k].all()
+    assert not out[:1500 - k - 1].any() and not out[1530 + k + 1:].any()
+    # The window's own ends are no fading: a round section's lines end there.
+    assert not out[1000:1010].any() and not out[1990:2000].any()
+
+
+def test_a_short_dropout_is_not_a_faded_stretch():
+    r = np.full(TH.size, 10.0)
+    window = np.ones(TH.size, bool)
+    r[700:705] = np.nan  # 0.09 mm: a speckle dropout
+    assert not fading_points(r, window, STEP, gap_mm=0.3).any()
+
+
+def test_notch_depth_finds_a_valley_and_no_round_section():
+    # A round section off the axis lies above every chord (a circle by L²/2R).
+    for x0, y0, r0 in ((0.0, 0.0, 10.0), (3.0, 0.0, 10.0), (2.0, -2.0, 5.0)):
+        prof = section_profile(TH, [_circle(r0, x0, y0)])
+        assert np.nanmax(notch_depth(TH, prof)) < 0
+    # A V-shaped valley 0.3 mm deep and 10° wide at θ = 30° on a 3 mm strand.
+    r = np.full(TH.size, 3.0) - 0.3 * np.clip(1 - np.abs(np.degrees(TH) - 30) / 5.0, 0, None)
+    d = notch_depth(TH, section_profile(TH, [r]))
+    at = np.abs(np.degrees(TH) - 30) < 2
+    assert np.all(d[at] > 0.08)
+    assert np.all(d[np.abs(np.degrees(TH) - 30) > 40] < 0.01)
+
+
+def test_section_profile_is_the_median_of_the_views():
+    a = np.full(TH.size, 10.0)
+    b = np.full(TH.size, 10.0)
+    b[100:110] = 10.5  # one view's wrong pick where two views see
+    c = np.full(TH.size, 10.0)
+    prof = section_profile(TH, [a, b, c])
+    assert np.allclose(prof, 10.0)
+    assert np.isnan(section_profile(TH, [np.full(TH.size, np.nan)])).all()
+
+
+def test_rejection_counts_name_every_code():
+    from lts360.recon.triangulation.peaks import Quality
+
+    q = np.array([Quality.NOTCH, Quality.NOTCH, Quality.FADING, Quality.FOUND,
+                  Quality.DISCONTINUOUS, Quality.TRUNCATED], np.uint8)
+    assert rejection_counts(q) == {"continuity": 1, "fading": 1, "notch": 2, "truncated": 1,
+                                   "saturated_plateau": 0}
+
+
+def test_bad_arguments():
+    with pytest.raises(ValueError):
+        fading_points(np.ones(3), np.ones(4, bool), STEP)
+    with pytest.raises(ValueError):
+        fading_points(np.ones(3), np.ones(3, bool), 0.0)
+
+
+def test_the_cloud_header_carries_the_rejections(tmp_path):
+    from lts360.recon.triangulation.cloud import (Cloud, read_cloud, read_cloud_rejections,
+                                                  write_cloud)
+    from lts360.recon.triangulation.peaks import Quality
+
+    n = 4
+    pts = np.array([[1.0, 0, 0], [np.nan] * 3, [np.nan] * 3, [0, 1.0, 0]])
+    q = np.array([Quality.FOUND, Quality.NOTCH, Quality.FADING, Quality.FOUND], np.uint8)
+    cloud = Cloud(pts, np.zeros(n), np.ones(n), np.zeros(n, np.uint8), q,
+                  np.zeros(n, np.int32), np.ones(n, np.float32))
+    write_cloud(tmp_path / "c.ply", cloud, comments=["measured by a test"])
+    assert read_cloud_rejections(tmp_path / "c.ply")["notch"] == 1
+    assert read_cloud_rejections(tmp_path / "c.ply")["fading"] == 1
+    assert len(read_cloud(tmp_path / "c.ply")) == n
+    with pytest.raises(ValueError):
+        write_cloud(tmp_path / "d.ply", cloud, comments=["two\nlines"])
+
+
+def test_reject_spurious_flags_a_faded_flank_and_keeps_a_round_section():
+    import dataclasses
+
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.inverse import InverseResult, ViewResult
+    from lts360.recon.triangulation.peaks import Quality
+    from lts360.recon.triangulation.reject import reject_spurious
+
+    grid = CylGrid.from_ranges((9.0, 11.0), theta_step_deg=0.1, r_step_mm=0.005)
+    th = grid.theta_rad
+    r = _circle(10.0, 1.0, 0.5)
+    window = (th > -1.0) & (th < 1.5)
+    q = np.where(window, Quality.FOUND, Quality.OUTSIDE_WINDOW).astype(np.uint8)
+    v = ViewResult("direct", th, np.where(window, r, np.nan), r, q, np.ones(th.size), window,
+                   np.zeros(2))
+    res = InverseResult(grid, {"direct": v}, "centroid", 25.5, 255.0, False)
+    out = reject_spurious(res)
+    assert out.views["direct"].valid.sum() == window.sum()  # round: nothing rejected
+    faded = window & (np.abs(th - 0.2) < np.radians(2))
+    rr = np.where(faded, np.nan, v.r_mm)
+    qq = np.where(faded, Quality.NO_PEAK, q).astype(np.uint8)
+    out = reject_spurious(dataclasses.replace(res, views={
+        "direct": dataclasses.replace(v, r_mm=rr, quality=qq)}))
+    assert int(np.sum(out.views["direct"].quality == Quality.FADING)) > 0
+    assert not np.any(out.views["direct"].valid & (out.views["direct"].quality != Quality.FOUND))
