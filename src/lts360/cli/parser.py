@@ -280,7 +280,8 @@ def build_parser() -> argparse.ArgumentParser:
                      "rolling); errors per view as one instant and row-aware, lumps missed")
     q.add_argument("--objects", default=None, help="comma-separated (default cable-8,grooved-shaft)")
     q.add_argument("--speeds-mm-s", default="0,100,300,1000", help="comma-separated feeds")
-    q.add_argument("--exposures-us", default="100", help="comma-separated exposures")
+    q.add_argument("--exposures-us", default="auto", help="comma-separated exposures, or auto "
+                   "(what auto-exposure sets for each still object)")
     q.add_argument("--shutters", default="global,rolling", help="global, rolling or both")
     q.add_argument("--line-time-us", type=float, default=10.0, help="rolling shutter line time")
     q.add_argument("--profile-rate-hz", type=float, default=200.0,

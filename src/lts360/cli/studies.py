@@ -215,7 +215,8 @@ def cmd_study_line_speed(args) -> int:
         if name.split(":")[0] not in known:
             raise UsageError(f"--objects: unknown object {name!r}")
     speeds = _floats(args.speeds_mm_s, "--speeds-mm-s")
-    exposures = _floats(args.exposures_us, "--exposures-us", positive=True)
+    exposures = ([0.0] if args.exposures_us.strip() == "auto"
+                 else _floats(args.exposures_us, "--exposures-us", positive=True))
     shutters = args.shutters.split(",")
     if not shutters or any(s not in ("global", "rolling") for s in shutters):
         raise UsageError(f"--shutters: global, rolling or both, got {args.shutters!r}")

@@ -1,8 +1,9 @@
 """``lts360 study line-speed``: what the line's speed, the exposure and the shutter do to a
 single-image section.
 
-For each object (default: a stranded cable and the grooved shaft), speed, exposure and shutter
-type, one frame of the object moving along its axis is rendered
+For each object (default: a stranded cable and the grooved shaft), speed, exposure (default
+"auto": what auto-exposure sets for the still object, so that the stripe is as bright as in a
+still frame) and shutter type, one frame of the object moving along its axis is rendered
 (:func:`lts360.simulator.motion.simulate_moving_frame`), measured by inverse triangulation
 with the rig's true calibration (so that only the motion is studied), each point tagged with
 its own row's time (:class:`lts360.recon.triangulation.measure.RowTiming`), and scored two
@@ -84,7 +85,13 @@ def line_speed_trial(trial: Trial) -> TrialOutput:
     obj = build_object(p["object"])
     shutter = (Shutter("rolling", p["line_time_us"] * 1e-6) if p["shutter"] == "rolling"
                else Shutter())
-    acq = Acquisition(p["exposure_us"] * 1e-6, shutter=shutter,
+    exposure_s = p["exposure_us"] * 1e-6
+    if exposure_s == 0:  # "auto": what auto-exposure sets for the still object
+        from lts360.simulator.frame import simulate_frame
+
+        exposure_s = simulate_frame(rig, obj, spp=int(p["spp"]), seed=int(p["render_seed"]),
+                                    scale=float(p["scale"])).exposure_time_s
+    acq = Acquisition(exposure_s, shutter=shutter,
                       motion=Motion(speed_mm_s=p["speed_mm_s"]))
     frame = simulate_moving_frame(rig, obj, acq, spp=int(p["spp"]), seed=int(p["render_seed"]),
                                   noise=p["noise"], scale=float(p["scale"]))
@@ -112,6 +119,7 @@ def line_speed_trial(trial: Trial) -> TrialOutput:
     e_instant = radial_error(np.full(len(pts), t0))  # all taken at the one instant t0
     e_rows = radial_error(t)
     values = {"n_points": float(ok.sum()), "renders": float(frame.truth["motion"]["renders"]),
+              "exposure_used_us": exposure_s * 1e6,
               "render_s": float(frame.render.seconds)}
     rms_i, rms_r, mean_i = [], [], []
     from lts360.recon.triangulation.cloud import VIEW_CODES
@@ -151,7 +159,7 @@ def _largest_speed(speeds, rms, limit) -> float:
 
 
 def run_line_speed_study(out_dir, *, objects=DEFAULT_OBJECTS, speeds_mm_s=(0.0, 100.0, 500.0),
-                         exposures_us=(100.0,), shutters=("global", "rolling"),
+                         exposures_us=(0.0,), shutters=("global", "rolling"),
                          line_time_us: float = 10.0, scale: float = 0.5, spp: int = 16,
                          noise: str = "none", rig: str = "paper", accuracy_um: float = 20.0,
                          profile_rate_hz: float = 200.0, lumps_mm=(0.5, 1.0, 2.0, 5.0),
@@ -174,7 +182,8 @@ def run_line_speed_study(out_dir, *, objects=DEFAULT_OBJECTS, speeds_mm_s=(0.0, 
     for i in range(ds.sizes["trial"]):
         d = ds.isel(trial=i)
         rows.append({k: (d[k].item() if d[k].ndim == 0 else d[k].values.tolist())
-                     for k in ("object", "speed_mm_s", "exposure_us", "shutter", "n_points",
+                     for k in ("object", "speed_mm_s", "exposure_us", "exposure_used_us",
+                               "shutter", "n_points",
                                "rms_instant_mm", "rms_rows_mm", "view_disagreement_mm",
                                "view_rms_instant_mm", "renders", "render_s") if k in d})
     limits = []
@@ -210,7 +219,7 @@ def format_line_speed(table: dict) -> str:
              f"{'object':14s} {'shutter':8s} {'exp µs':>7s} {'v mm/s':>8s} {'points':>7s} "
              f"{'robust rms, one instant':>24s} {'row-aware':>10s} {'views apart':>12s}"]
     for r in table["rows"]:
-        lines.append(f"{r['object']:14s} {r['shutter']:8s} {r['exposure_us']:7.0f} "
+        lines.append(f"{r['object']:14s} {r['shutter']:8s} {r['exposure_used_us']:7.0f} "
                      f"{r['speed_mm_s']:8.0f} {r['n_points']:7.0f} "
                      f"{r['rms_instant_mm'] * 1e3:21.1f} µm {r['rms_rows_mm'] * 1e3:7.1f} µm "
                      f"{r['view_disagreement_mm'] * 1e3:9.1f} µm")
@@ -218,7 +227,8 @@ def format_line_speed(table: dict) -> str:
                  f"{table['accuracy_um']:g} µm of the still frame's:")
     for L in table["largest_speed"]:
         v = L["largest_speed_mm_s"]
-        lines.append(f"  {L['object']:14s} {L['shutter']:8s} {L['exposure_us']:5.0f} µs: "
+        lines.append(f"  {L['object']:14s} {L['shutter']:8s} "
+                     + ("auto" if L["exposure_us"] == 0 else f"{L['exposure_us']:.0f} µs") + ": "
                      + ("none of the swept speeds" if not math.isfinite(v) else f"{v:g} mm/s"))
     lu = table["lumps"]
     lines.append(f"lumps missed at {lu['profile_rate_hz']:g} profiles/s (P, lump length "
@@ -227,6 +237,10 @@ def format_line_speed(table: dict) -> str:
         lines.append(f"  {v:8.0f} mm/s (spacing {v / lu['profile_rate_hz']:.3g} mm): "
                      + ", ".join(f"{x:.2f}" for x in p))
     return "\n".join(lines)
+
+
+def _exp(us: float) -> str:
+    return "auto exposure" if us == 0 else f"{us:g} µs"
 
 
 def _plot(table: dict, path: Path) -> None:
@@ -243,9 +257,9 @@ def _plot(table: dict, path: Path) -> None:
                      key=lambda r: r["speed_mm_s"])
         v = [r["speed_mm_s"] for r in sel]
         ax.plot(v, [r["rms_instant_mm"] * 1e3 for r in sel], "o-",
-                label=f"{key[0]}, {key[1]}, {key[2]:g} µs (as one instant)")
+                label=f"{key[0]}, {key[1]}, {_exp(key[2])} (as one instant)")
         ax.plot(v, [r["rms_rows_mm"] * 1e3 for r in sel], "x--", alpha=0.6,
-                label=f"{key[0]}, {key[1]}, {key[2]:g} µs (row-aware)")
+                label=f"{key[0]}, {key[1]}, {_exp(key[2])} (row-aware)")
     ax.axhline(table["accuracy_um"], color="k", lw=0.8, ls=":")
     ax.set_xlabel("line speed (mm/s)")
     ax.set_ylabel("robust RMS radial error (µm)")
