@@ -260,7 +260,6 @@ def _plot(table: dict, path: Path) -> None:
                 label=f"{key[0]}, {key[1]}, {_exp(key[2])} (as one instant)")
         ax.plot(v, [r["rms_rows_mm"] * 1e3 for r in sel], "x--", alpha=0.6,
                 label=f"{key[0]}, {key[1]}, {_exp(key[2])} (row-aware)")
-    ax.axhline(table["accuracy_um"], color="k", lw=0.8, ls=":")
     ax.set_xlabel("line speed (mm/s)")
     ax.set_ylabel("robust RMS radial error (µm)")
     ax.set_title("single-image section of a moving object")
