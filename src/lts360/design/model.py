@@ -97,7 +97,7 @@ class Conditions:
 
     diameters_mm: tuple = (20.0,)
     placement_mm: float = 0.0
-    n_theta: int = 360
+    n_theta: int = 180
     theta_step_meas_deg: float = 0.25
     max_incidence_deg: float = 80.0
     margin_px: float = 0.0
@@ -457,12 +457,11 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
     p_all = F(pvec)
     if gradient:
         dr.enable_grad(p_all)
-    P, Pc = {}, {}
+    P = {}
     for i, prm in enumerate(PARAMETERS):
         # Full width from the start: the reverse pass then reduces each parameter's gradient
         # once (the gather's adjoint) instead of once per use.
         P[prm.name] = dr.gather(F, p_all, dr.full(U, i, n))
-        Pc[prm.name] = dr.gather(F, p_all, dr.full(U, i, n_case))  # per case
     base = space.base
     cam, las, sensor = base.camera, base.laser, base.sensor
     geo = _geometry(o, P, space)
@@ -480,9 +479,7 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
     X = V3(cxy[0] + r * ct, cxy[1] + r * st, 0.0 * ct)
 
     def case_sum(value):
-        out = dr.zeros(F, n_case)
-        dr.scatter_add(out, value, ci)
-        return out
+        return dr.block_sum(value + 0.0 * ct, n_th)  # elements are case-major
 
     # --- the laser: which paths light each point, its irradiance and the sheet's σ ----------
     seqs = mirror_sequences(base.mirrors, 2)
@@ -665,13 +662,13 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
                   + o.relu2(multi - cond.max_multi_reflection_pct))
     # The rig's own validity: mirrors clear the largest object, camera and laser in front.
     r_max = float(base.design.max_object_radius_mm)
-    geo_c = _geometry(o, Pc, space)
-    clear = Pc["mirror_corner_distance_mm"] * dr.sin(Pc["beta_deg"] * (math.pi / 360.0)) - r_max
-    rig_pen = o.relu2(1.0 - clear) + o.relu2(r_max + 1.0 - Pc["laser_distance_mm"])
-    for m in geo_c["mirrors"]:
-        rig_pen = rig_pen + o.relu2(1.0 - (dr.dot(m.n, geo_c["pos"]) - m.d))
-        rig_pen = rig_pen + o.relu2(1.0 - (dr.dot(m.n, geo_c["laser"]) - m.d))
-    rig_pen = rig_pen + o.relu2(1.0 - (Pc["focus_distance_mm"] - Pc["focal_length_mm"]))
+    clear = P["mirror_corner_distance_mm"] * dr.sin(P["beta_deg"] * (math.pi / 360.0)) - r_max
+    rig_pen = o.relu2(1.0 - clear) + o.relu2(r_max + 1.0 - P["laser_distance_mm"])
+    for m in mirrors:
+        rig_pen = rig_pen + o.relu2(1.0 - (dr.dot(m.n, geo["pos"]) - m.d))
+        rig_pen = rig_pen + o.relu2(1.0 - (dr.dot(m.n, geo["laser"]) - m.d))
+    rig_pen = rig_pen + o.relu2(1.0 - (s_f - f_mm))
+    rig_pen = case_sum(rig_pen * (1.0 / n_th))  # the same in every element: per case
     pen = pen + 1e3 * rig_pen
     J_case = U_um + pen
     res = dict(J_case=J_case, U_um=U_um, sigma_R_um=sigma_R_um, point_rms_um=point_rms_um,
