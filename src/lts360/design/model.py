@@ -63,6 +63,9 @@ CORRELATION_PX = 1.0
 EXPOSURE_POWER = 16.0
 #: Auto-exposure target, as a fraction of the full well.
 EXPOSURE_TARGET = 0.8
+#: The smooth overlaps are held this much above the required overlap (the smooth and the hard
+#: overlap differ by up to a sigmoid width at each end of a window).
+OVERLAP_SAFETY_DEG = 2.0
 #: Threshold of the peak detector (fraction of full scale) — sets the centroid's window.
 THRESHOLD_FRACTION = 0.1
 
@@ -602,7 +605,8 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
         vw = views[name]
         sw = vw["sig_w"]
         e_peak = EXPOSURE_TARGET * fw * vw["bright"] / b_ref
-        S = e_peak * math.sqrt(2.0 * math.pi) * sw
+        # At least one electron: an unlit point then has a large but finite σ (and weight 0).
+        S = dr.maximum(e_peak * math.sqrt(2.0 * math.pi) * sw, 1.0)
         n_shot2 = sw * sw / S
         x_t = x_t_factor * sw
         n_read2 = read2 * (2.0 * x_t * x_t * x_t / 3.0) / (S * S)
@@ -637,7 +641,7 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
     var_R = (g0 * (cs["Sa"] * g0 + cs["Sb"] * g1 + cs["Sc"] * g2)
              + g1 * (cs["Sb"] * g0 + cs["Sd"] * g1 + cs["Se"] * g2)
              + g2 * (cs["Sc"] * g0 + cs["Se"] * g1 + cs["Sf"] * g2))
-    sigma_R_um = dr.sqrt(dr.maximum(var_R, 0.0)) * 1e3
+    sigma_R_um = dr.sqrt(dr.maximum(var_R, 0.0) + 1e-18) * 1e3  # finite slope when 0
     U_um = 2.0 * sigma_R_um
     point_rms_um = dr.sqrt(cs["msr2"] / (cs["m"] + 1e-30)) * 1e3
     speckle_rms_um = dr.sqrt(cs["msp2"] / (cs["m"] + 1e-30)) * 1e3
@@ -657,8 +661,9 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
     ov_dl, ov_dr, ov_lr = (case_sum(a * b * step_deg) for a, b in ((md, ml), (md, mr), (ml, mr)))
     multi = case_sum(union1 * (1.0 - none_double) * (100.0 / n_th))
     wpen = cond.penalty_um_per_deg2
-    pen = wpen * (o.relu2(cond.min_coverage_deg - cov) + o.relu2(cond.min_overlap_deg - ov_dl)
-                  + o.relu2(cond.min_overlap_deg - ov_dr) + o.relu2(cond.min_overlap_deg - ov_lr)
+    min_ov = cond.min_overlap_deg + OVERLAP_SAFETY_DEG if cond.min_overlap_deg > 0 else 0.0
+    pen = wpen * (o.relu2(cond.min_coverage_deg - cov) + o.relu2(min_ov - ov_dl)
+                  + o.relu2(min_ov - ov_dr) + o.relu2(min_ov - ov_lr)
                   + o.relu2(multi - cond.max_multi_reflection_pct))
     # The rig's own validity: mirrors clear the largest object, camera and laser in front.
     r_max = float(base.design.max_object_radius_mm)
