@@ -438,15 +438,71 @@ def _frozen(space: DesignSpace, cond: Conditions, gradient: bool):
     return call
 
 
-def _grid(o: "_Ops", cond: Conditions) -> dict:
-    """The (case, θ) elements as Dr.Jit arrays (made outside the recorded function)."""
+def _grid(o: "_Ops", cond: Conditions, designs: int = 1) -> dict:
+    """The (design, case, θ) elements as Dr.Jit arrays (made outside the recorded function)."""
     cases = cond.cases()
     n_th, n_case = int(cond.n_theta), len(cases)
-    th = np.tile(-math.pi + np.arange(n_th) * (2.0 * math.pi / n_th), n_case)
-    cs = np.repeat(np.asarray(cases, dtype=float), n_th, axis=0)
+    blocks = designs * n_case
+    th = np.tile(-math.pi + np.arange(n_th) * (2.0 * math.pi / n_th), blocks)
+    cs = np.repeat(np.tile(np.asarray(cases, dtype=float), (designs, 1)), n_th, axis=0)
+    block = np.repeat(np.arange(blocks), n_th)
     out = dict(theta=o.F(th), ct=o.F(np.cos(th)), st=o.F(np.sin(th)), r=o.F(cs[:, 0]),
-               cx=o.F(cs[:, 1]), cy=o.F(cs[:, 2]), ci=o.U(np.repeat(np.arange(n_case), n_th)))
+               cx=o.F(cs[:, 1]), cy=o.F(cs[:, 2]), ci=o.U(block), di=o.U(block // n_case))
     o.dr.eval(out)
+    return out
+
+
+#: Designs per batch of :func:`evaluate_batch` (one recorded function; the last batch padded).
+BATCH = 128
+
+
+def evaluate_batch(space: DesignSpace, X, conditions: Conditions | None = None) -> dict:
+    """Values (no gradient) of many designs at once, for maps and grids.
+
+    Parameters
+    ----------
+    X : (m, n_free) float
+        Free parameters in physical units.
+
+    Returns
+    -------
+    dict of (m, n_cases) float
+        ``objective`` is (m,): the worst case's ``U_um + penalty_um``.
+    """
+    cond = conditions or Conditions()
+    X = np.atleast_2d(np.asarray(X, dtype=float))
+    base = space.values()
+    names = [p.name for p in PARAMETERS]
+    full = np.tile([base[nm] for nm in names], (len(X), 1))
+    for j, nm in enumerate(space.free):
+        full[:, names.index(nm)] = X[:, j]
+    key = (id(space), cond, "batch")
+    hit = _FROZEN.get(key)
+    if hit is None or hit[0] is not space:
+        o = _Ops()
+        grid = _grid(o, cond, BATCH)
+
+        @o.dr.freeze
+        def run(p, g):
+            return _run(o, space, cond, p, g, gradient=False, keep=False)
+
+        def call(pvec):
+            return run(o.F(pvec), grid)
+
+        _FROZEN[key] = (space, call)
+        hit = _FROZEN[key]
+    call = hit[1]
+    n_case = len(cond.cases())
+    parts: dict = {}
+    for start in range(0, len(full), BATCH):
+        chunk = full[start:start + BATCH]
+        pad = np.concatenate([chunk, np.repeat(chunk[-1:], BATCH - len(chunk), axis=0)])
+        res = call(pad.reshape(-1))
+        for k, v in res.items():
+            parts.setdefault(k, []).append(
+                np.asarray(v.numpy(), dtype=float).reshape(BATCH, n_case)[:len(chunk)])
+    out = {k: np.concatenate(v) for k, v in parts.items()}
+    out["objective"] = out["J_case"].max(axis=1)
     return out
 
 
@@ -454,8 +510,8 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
          keep: bool) -> dict:
     """The model in Dr.Jit: per-case outputs (and ``grad``, ∂J/∂(every parameter))."""
     dr, F, V3, U = o.dr, o.F, o.V3, o.U
-    cases = cond.cases()
-    n_th, n_case = int(cond.n_theta), len(cases)
+    n_th = int(cond.n_theta)
+    n_case = dr.width(grid["ci"]) // n_th  # designs × cases
     n = n_th * n_case
     p_all = F(pvec)
     if gradient:
@@ -464,7 +520,7 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
     for i, prm in enumerate(PARAMETERS):
         # Full width from the start: the reverse pass then reduces each parameter's gradient
         # once (the gather's adjoint) instead of once per use.
-        P[prm.name] = dr.gather(F, p_all, dr.full(U, i, n))
+        P[prm.name] = dr.gather(F, p_all, grid["di"] * len(PARAMETERS) + i)
     base = space.base
     cam, las, sensor = base.camera, base.laser, base.sensor
     geo = _geometry(o, P, space)

@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from lts360.design.model import Conditions, evaluate
+from lts360.design.model import Conditions, evaluate, evaluate_batch
 from lts360.design.params import DesignError, DesignSpace
 from lts360.scenes.checks import RigError
 from lts360.scenes.coverage import coverage
@@ -144,8 +144,7 @@ def grid_search(space: DesignSpace, cond: Conditions, *, points_per_axis: int = 
     else:
         gen = np.random.default_rng(rng)
         s = axis[gen.integers(0, points_per_axis, size=(max_points, n))]
-    f = np.array([evaluate(space, space.from_scaled(si), cond, gradient=False).objective
-                  for si in s])
+    f = evaluate_batch(space, space.from_scaled(s), cond)["objective"]
     order = np.argsort(f)
     return s[order], f[order]
 
