@@ -25,11 +25,13 @@ placement of its centre) and each θ of a uniform grid:
 * smooth coverage: every constraint of :func:`lts360.scenes.coverage.coverage` (the path meets
   each mirror inside its rectangle on its reflecting side, unoccluded by the object cylinder or
   another mirror; incidence limit for camera and laser; image bounds with margin; the laser
-  fan), each a sigmoid of its margin, multiplied; the hard coverage is computed beside it from
-  the rig itself.
+  fan), each a smooth step of its margin, multiplied (``measured``, which tends to coverage()'s
+  as the sharpness grows); then the peak detector's threshold (``detected``: the line's peak,
+  under the auto-exposure, above 1.25 × the 10 %-of-full-scale threshold), which loses dim
+  and strongly defocused views.  The hard coverage is computed beside it from the rig itself.
 
 Where the model stops (not modelled): the calibration's share and the §4.4 compensation;
-saturation and the exposure range; the threshold's loss of dim points; speckle correlated
+saturation and the exposure range; speckle correlated
 between pixels (speckle larger than a pixel); the sheet's curvature bias; glossy materials
 (the surface is white Lambertian); ambient light.  Every length in mm, angles in radians.
 """
@@ -67,8 +69,12 @@ EXPOSURE_TARGET = 0.8
 #: The smooth overlaps are held this much above the required overlap (the smooth and the hard
 #: overlap differ by up to a sigmoid width at each end of a window).
 OVERLAP_SAFETY_DEG = 2.0
-#: Threshold of the peak detector (fraction of full scale) — sets the centroid's window.
+#: Threshold of the peak detector (fraction of full scale) — sets the centroid's window, and
+#: a point counts as detected when its peak exceeds it by DETECT_MARGIN (a smooth step of
+#: width DETECT_WIDTH / sharpness in that ratio).
 THRESHOLD_FRACTION = 0.1
+DETECT_MARGIN = 0.25
+DETECT_WIDTH = 0.25
 
 
 def pixel_speckle_contrast(pixel_pitch_um: float, wavelength_nm: float, f_number: float) -> float:
@@ -697,7 +703,11 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
         vw.update(noise=dict(speckle=dr.sqrt(n_sp2), shot=dr.sqrt(n_shot2),
                              read=dr.sqrt(n_read2), locking=n_lock), sigma_r_mm=sr_mm,
                   e_peak=e_peak)
-        m = vw["measured"] * nu
+        # The peak detector's threshold: a line whose peak falls under it (dim, or blurred
+        # by defocus) is lost.
+        ratio = e_peak / (THRESHOLD_FRACTION * fw)
+        vw["detected"] = vw["measured"] * o.sig((ratio - 1.0 - DETECT_MARGIN) / (DETECT_WIDTH / k))
+        m = vw["detected"] * nu
         corr = 1.0 + CORRELATION_PX / (vw["arc_px"] + 1e-12)
         w2 = m * corr * sr_mm * sr_mm
         for key, val in (("a", 1.0), ("b", ct), ("c", st), ("d", ct * ct), ("e", ct * st),
@@ -724,14 +734,14 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
     step_deg = math.degrees(step)
     none_single = 1.0
     for name in singles:
-        none_single = none_single * (1.0 - views[name]["measured"])
+        none_single = none_single * (1.0 - views[name]["detected"])
     union1 = 1.0 - none_single
     none_double = 1.0
     for name in doubles:
         none_double = none_double * (1.0 - views[name]["measured"])
     cov = case_sum(union1 * step_deg)
     mir = [m.name for m in base.mirrors]
-    md, ml, mr = (views[nm]["measured"] for nm in ("direct", mir[0], mir[1]))
+    md, ml, mr = (views[nm]["detected"] for nm in ("direct", mir[0], mir[1]))
     ov_dl, ov_dr, ov_lr = (case_sum(a * b * step_deg) for a, b in ((md, ml), (md, mr), (ml, mr)))
     multi = case_sum(union1 * (1.0 - none_double) * (100.0 / n_th))
     wpen = cond.penalty_um_per_deg2
@@ -781,6 +791,8 @@ def _detail(o: _Ops, views, singles, theta, n_th, n_case) -> dict:
     for name, vw in views.items():
         d = {"uv": np.stack([arr(vw["u"]), arr(vw["v"])], -1), "seen": arr(vw["seen"]),
              "measured": arr(vw["measured"])}
+        if "detected" in vw:
+            d["detected"] = arr(vw["detected"])
         if name in singles:
             d.update(sigma_r_um=arr(vw["sigma_r_mm"]) * 1e3,
                      sensitivity_mm_per_px=arr(vw["sens"]), width_px=arr(vw["sig_w"]),
