@@ -669,7 +669,9 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
     fw = float(sensor.full_well_e)
     K = float(sensor.system_gain)
     read2 = float(sensor.dark_noise_e) ** 2 + 1.0 / (12.0 * K * K)
-    x_t_factor = math.sqrt(2.0 * math.log(EXPOSURE_TARGET / THRESHOLD_FRACTION))
+    # The threshold in electrons (10 % of full scale, less the black level).
+    thr_e = (THRESHOLD_FRACTION * (2 ** int(sensor.bit_depth) - 1)
+             - float(sensor.dark_offset_dn)) / K
     a_c = 4.0 * lam_um * lam_um * N * N / math.pi  # speckle correlation area (µm²)
     a_g = math.pi / a_c
     p_um = cam.pixel_pitch_um
@@ -684,14 +686,21 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
     for name in singles:
         vw = views[name]
         sw = vw["sig_w"]
-        e_peak = EXPOSURE_TARGET * fw * vw["bright"] / b_ref
         # At least one electron: an unlit point then has a large but finite σ (and weight 0).
-        S = dr.maximum(e_peak * math.sqrt(2.0 * math.pi) * sw, 1.0)
-        n_shot2 = sw * sw / S
-        x_t = x_t_factor * sw
-        n_read2 = read2 * (2.0 * x_t * x_t * x_t / 3.0) / (S * S)
+        e_peak = dr.maximum(EXPOSURE_TARGET * fw * vw["bright"] / b_ref, 1.0)
+        # Centroid of I − t over the run above the threshold t = τ·peak, in units of σ_w:
+        # window ±a, a = √(2 ln 1/τ); D1 = ∫(g − τ), N1 = ∫x² g, N2 = ∫x² g² (g = e^{−x²/2}).
+        tau = dr.clip(thr_e / e_peak, 1e-3, 0.95)
+        a = dr.sqrt(2.0 * dr.log(1.0 / tau))
+        erf_a2 = dr.erf(a * (1.0 / math.sqrt(2.0)))
+        ea2 = dr.exp(-0.5 * a * a)
+        d1 = math.sqrt(2.0 * math.pi) * erf_a2 - 2.0 * a * tau
+        n1 = math.sqrt(2.0 * math.pi) * erf_a2 - 2.0 * a * ea2
+        n2 = 0.5 * math.sqrt(math.pi) * dr.erf(a) - a * ea2 * ea2
+        n_shot2 = sw * n1 / (e_peak * d1 * d1)
+        n_read2 = read2 * sw * (2.0 * a * a * a / 3.0) / (e_peak * e_peak * d1 * d1)
         if cond.speckle == "pixel":
-            n_sp2 = c_px2 * sw / (4.0 * math.sqrt(math.pi))
+            n_sp2 = c_px2 * sw * n2 / (d1 * d1)
         else:
             n_sp = lam_um * N / (math.pi * p_um)
             n_sp2 = n_sp * n_sp + 0.0 * sw
@@ -705,7 +714,7 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
                   e_peak=e_peak)
         # The peak detector's threshold: a line whose peak falls under it (dim, or blurred
         # by defocus) is lost.
-        ratio = e_peak / (THRESHOLD_FRACTION * fw)
+        ratio = e_peak / thr_e
         vw["detected"] = vw["measured"] * o.sig((ratio - 1.0 - DETECT_MARGIN) / (DETECT_WIDTH / k))
         m = vw["detected"] * nu
         corr = 1.0 + CORRELATION_PX / (vw["arc_px"] + 1e-12)
