@@ -15,10 +15,12 @@ placement of its centre) and each θ of a uniform grid:
   (``w(L) = w0 √(1 + ((L − L_w)/z_R)²)``, σ = w/2) projected across the line, ⊕ thin-lens
   defocus (blur-circle diameter ``b = A f |Z − s| / (Z (s − f))``, σ = b/4) ⊕ diffraction
   (0.42 λN) ⊕ the pixel box (1/12 px²);
-* the line-position noise across the line (px): speckle (see :data:`SPECKLE_MODELS`), the
-  sensor's shot and read noise with quantisation (EMVA 1288 parameters; the exposure is the
-  simulator's auto-exposure, the brightest stripe at 80 % of the full well), pixel locking
-  (:mod:`lts360.design.locking`), independent and added in quadrature;
+* the line-position noise across the line (px) of the paper's detector, the centroid of
+  ``I − t`` over the run above the threshold ``t`` (10 % of full scale, relative to each
+  point's peak): speckle (see :data:`SPECKLE_MODELS`), the sensor's shot and read noise with
+  quantisation (EMVA 1288 parameters; the exposure is the simulator's auto-exposure, the
+  brightest stripe at 80 % of the full well), pixel locking (:mod:`lts360.design.locking`),
+  independent and added in quadrature;
 * the per-point radius σ, and the σ of the radius after the circle fit (a least-squares fit
   of ``r_i = R + a cos θ_i + b sin θ_i`` to every measured point of every single view, the
   points' errors correlated over ``CORRELATION_PX`` of stripe length);
@@ -51,8 +53,9 @@ __all__ = ["Conditions", "Evaluation", "evaluate", "evaluate_batch", "pixel_spec
            "SPECKLE_MODELS", "CORRELATION_PX"]
 
 #: ``"pixel"``: the simulator's speckle — a multiplicative pattern of pixel-integrated contrast
-#: ``C_px`` (independent between pixels) on a Gaussian line of σ_w px, whose centroid then
-#: scatters by ``σ² = C_px² σ_w / (4 √π)``.  ``"dorsch"``: the optical limit of Dorsch,
+#: ``C_px`` (independent between pixels) on a Gaussian line of σ_w px, whose threshold centroid
+#: then scatters by ``σ² = C_px² σ_w N2 / D1²`` (``C_px² σ_w / (4 √π)`` without threshold;
+#: see :func:`_run`'s noise section and docs/design.md).  ``"dorsch"``: the optical limit of Dorsch,
 #: Häusler and Herrmann (Appl. Opt. 33(7) 1994), ``δx = C λ / (2π sin u)`` in the object with
 #: ``C = 1`` (fully developed speckle as the lens images it) and ``sin u = A / (2 L)`` the
 #: aperture seen along the view's own path ``L``; in the image that is ``λ N / (π p)`` px for
