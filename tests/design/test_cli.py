@@ -58,3 +58,14 @@ def test_map_writes_a_png(tmp_path):
     assert main(["design", "map", "--x", "alpha_deg", "--y", "beta_deg", "--n", "12",
                  "--n-theta", "90", "--out", str(out)]) == 0
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.slow  # ~10 s: records the batched and the gradient models
+def test_optimize_infeasible_constraints_exit_2_and_write_nothing(tmp_path, capsys):
+    out = tmp_path / "opt"
+    rc = main(["design", "optimize", "--out", str(out), "--free", "alpha_deg,beta_deg",
+               "--min-overlap-deg", "60", "--starts", "2", "--n-theta", "90",
+               "--diameters-mm", "20"])
+    assert rc == 2
+    assert "no start reached a valid rig" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
