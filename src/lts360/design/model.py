@@ -260,7 +260,7 @@ class _Mirror:
 
 def _geometry(o: _Ops, P: dict, space: DesignSpace):
     """Camera pose, intrinsics, mirrors and laser as Dr.Jit values of the parameters ``P``."""
-    dr, F, V3 = o.dr, o.F, o.V3
+    dr, V3 = o.dr, o.V3
     base = space.base
     deg = math.pi / 180.0
     a = P["alpha_deg"] * deg
@@ -539,7 +539,6 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
     dr, F, V3, U = o.dr, o.F, o.V3, o.U
     n_th = int(cond.n_theta)
     n_case = dr.width(grid["ci"]) // n_th  # designs × cases
-    n = n_th * n_case
     p_all = F(pvec)
     if gradient:
         dr.enable_grad(p_all)
@@ -571,7 +570,7 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
     seqs = mirror_sequences(base.mirrors, 2)
     names = [view_name(s, base.mirrors) for s in seqs]
     rho_m = float(base.design.mirror_reflectance)
-    w0_mm = float(0.0) + P["waist_um"] * 1e-3
+    w0_mm = P["waist_um"] * 1e-3
     lam_mm = las.wavelength_nm * 1e-6
     z_r = math.pi / (lam_mm * las.m_squared) * w0_mm * w0_mm
     cos_half_fan = dr.cos(P["fan_angle_deg"] * (math.pi / 360.0))
@@ -627,7 +626,7 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
         vw = views[name]
         seq = vw["seq"]
 
-        def jac(e):
+        def jac(e, seq=seq, vw=vw):
             for kk in seq:
                 e = o.reflect_dir(e, mirrors[kk].n)
             dxc, dyc, dzc = _rot(geo["R"], e)

@@ -212,7 +212,7 @@ def optimize(space: DesignSpace, cond: Conditions, *, starts: int = 6, points_pe
         reach = [None, None]  # evaluations and seconds to beat the grid's best (feasible or not)
         t1 = time.perf_counter()
 
-        def fun(s):
+        def fun(s, n_eval=n_eval, reach=reach, t1=t1):
             n_eval[0] += 1
             e = evaluate(space, space.from_scaled(s), cond, gradient=True)
             if not (np.isfinite(e.objective) and np.all(np.isfinite(e.gradient))):
