@@ -516,6 +516,8 @@ def evaluate_batch(space: DesignSpace, X, conditions: Conditions | None = None) 
         def call(pvec):
             return run(o.F(pvec), grid)
 
+        if len(_FROZEN) >= _FROZEN_MAX:
+            _FROZEN.pop(next(iter(_FROZEN)))
         _FROZEN[key] = (space, call)
         hit = _FROZEN[key]
     call = hit[1]
