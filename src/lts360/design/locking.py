@@ -28,7 +28,7 @@ SIGMA_MIN, SIGMA_MAX = 0.3, 4.0
 #: Threshold as a fraction of the line's peak.
 THRESHOLD_FRACTION = 0.125
 _KEYS_A = -0.5
-#: :func:`locking_fit` as computed (3 s); tests/design/test_noise.py checks it is current.
+#: :func:`locking_fit` as computed (3 s); tests/design/test_locking.py checks it is current.
 LOCKING_COEFFS = (0.414509921303487, -7.9555466443722, 2.269452488484479, -0.24667616077924237)
 
 
