@@ -67,9 +67,10 @@ def test_dorsch_speckle_limit_for_the_paper_optics():
     d = dorsch_speckle_limit_um(rig)
     cam = rig.camera
     sin_u = (cam.focal_length_mm / cam.f_number) / (2 * np.linalg.norm(cam.center_mm))
-    expect = d["contrast"] * 0.66 / (2 * math.pi * sin_u * math.sin(math.radians(40.0)))
+    expect = 0.66 / (2 * math.pi * sin_u * math.sin(math.radians(40.0)))  # C = 1
+    assert d["contrast"] == 1.0
     assert d["delta_z_um"] == pytest.approx(expect)
-    assert 0.2 < d["contrast"] < 0.5
+    assert 0.2 < d["pixel_contrast"] < 0.5
 
 
 mi = pytest.importorskip("mitsuba", reason="the study runs render")
@@ -240,3 +241,17 @@ def test_gauge_results_against_the_distance_from_the_axis():
     r = [float(np.hypot(*[float(kv.split("=")[1]) for kv in s["spec"].split(",")[1:3]]))
          for s in specs]
     assert max(r) <= 3.0 and max(r) > 2.0
+
+
+def test_format_mc_prints_the_speckle_figures():
+    from lts360.experiments.monte_carlo import format_mc
+
+    s = {"M": 10, "mean_um": -6.4, "u_um": 6.3, "interval95_um": [-18.7, 6.0], "gum_u_um": 6.0,
+         "ranking": ["speckle"], "budget": {"speckle": {"u_um": 1.9, "mean_um": -7.3, "M": 50}},
+         "dorsch": {"contrast": 1.0, "pixel_contrast": 0.34, "sin_u_obs": 0.0086,
+                    "triangulation_deg": 40.0, "delta_z_um": 18.9},
+         "speckle_model_point_um": {"pixel": 34.4, "dorsch": 20.5}, "speckle_point_std_um": 33.0}
+    text = format_mc(s)
+    assert "δz = 18.9 µm (C = 1" in text
+    assert "34.4 µm (the simulator's pixel speckle, contrast 0.340" in text
+    assert "simulated speckle-only point scatter 33.0 µm" in text

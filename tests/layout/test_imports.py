@@ -116,6 +116,18 @@ def test_geometry_and_scenes_do_not_import_the_layers_above():
         assert bad == set(), layer
 
 
+def test_design_models_rigs_without_the_simulator_or_the_reconstruction():
+    """design is an explicit model of the rig: scenes and geometry below it, never the
+    simulator, the reconstruction, a study or the command line; nothing below imports it."""
+    bad = {t for t in _imports_of("lts360.design")
+           if t.split(".")[1] in ("simulator", "recon", "experiments", "cli", "inspect")}
+    assert bad == set()
+    below = {t for layer in ("lts360.geometry", "lts360.scenes", "lts360.simulator",
+                             "lts360.recon")
+             for t in _imports_of(layer) if t.startswith("lts360.design")}
+    assert below == set()
+
+
 def test_inspect_reads_clouds_and_nominals_never_the_simulator():
     """inspect works on measured clouds: recon, geometry and scenes (nominal contours, the truth
     of rendered frames) below it; never the simulator, a study or the command line."""

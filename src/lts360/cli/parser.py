@@ -25,6 +25,7 @@ from lts360.cli.studies import (
     cmd_study_monte_carlo,
     cmd_study_plug_gauge,
 )
+from lts360.cli.design import add_design_parser
 from lts360.cli.usage import _Parser
 
 
@@ -310,6 +311,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "alu-pipe, grooved-shaft, cable-8, cube)")
     q.add_argument("--repeats", type=int, default=3, help="noise draws per object and level")
     q.set_defaults(func=cmd_study_algorithms)
+
+    add_design_parser(sub)
 
     s = sub.add_parser("demo", help="run the main job: rig, coverage, objects, figures")
     s.add_argument("--out", default="lts360-demo", help="output directory (default ./lts360-demo)")

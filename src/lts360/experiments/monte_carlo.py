@@ -72,7 +72,8 @@ from lts360.experiments.gauge_study import (DEFAULT_PLACEMENT_MM, DELTA_T_K, GAU
 from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study
 
 __all__ = ["INPUTS", "mc_trial", "run_monte_carlo_study", "coverage_interval",
-           "adaptive_stable", "dorsch_speckle_limit_um", "format_mc"]
+           "adaptive_stable", "dorsch_speckle_limit_um", "speckle_point_prediction_um",
+           "format_mc"]
 
 INPUTS = ("calibration", "compensation", "sensor_noise", "speckle", "placement", "temperature")
 
@@ -109,19 +110,40 @@ def adaptive_stable(batches: list[np.ndarray], n_dig: int = 2, p: float = 0.95) 
 
 
 def dorsch_speckle_limit_um(rig) -> dict:
-    """δz of Dorsch, Häusler and Herrmann (1994) for the rig's optics (µm), per point."""
+    """δz of Dorsch, Häusler and Herrmann (1994) for the rig's optics (µm), per point, at the
+    direct view's aim: ``C λ / (2π sin u sin θ)`` with ``C = 1`` — the contrast of fully
+    developed speckle as the lens images it, not the pixel-integrated contrast (also returned,
+    as ``pixel_contrast``, for the simulator's model) — and ``sin u`` the aperture seen from
+    the object axis.  The per-view figures over the whole section are in
+    :func:`speckle_point_prediction_um`."""
     from lts360.simulator.speckle import speckle_contrast_theory
 
     cam = rig.camera
     m = cam.focal_length_mm / (cam.focus_distance_mm - cam.focal_length_mm)
-    C = speckle_contrast_theory(cam.pixel_pitch_um, rig.laser.wavelength_nm, cam.f_number,
-                                magnification=m)
+    c_px = speckle_contrast_theory(cam.pixel_pitch_um, rig.laser.wavelength_nm, cam.f_number,
+                                   magnification=m)
     z_obj = float(np.linalg.norm(cam.center_mm))  # camera to the object axis
     sin_u = (cam.focal_length_mm / cam.f_number) / (2.0 * z_obj)
     theta = math.radians(rig.design.alpha_deg)
     lam_um = rig.laser.wavelength_nm * 1e-3
-    return {"contrast": C, "sin_u_obs": sin_u, "triangulation_deg": rig.design.alpha_deg,
-            "delta_z_um": C * lam_um / (2 * math.pi * sin_u * math.sin(theta))}
+    return {"contrast": 1.0, "pixel_contrast": c_px, "sin_u_obs": sin_u,
+            "triangulation_deg": rig.design.alpha_deg,
+            "delta_z_um": lam_um / (2 * math.pi * sin_u * math.sin(theta))}
+
+
+def speckle_point_prediction_um(rig, diameter_mm: float = 19.9987) -> dict:
+    """Per-point speckle σ_r (rms over the measured section, µm) that the design model
+    (:mod:`lts360.design`) predicts: ``pixel`` — the simulator's speckle (pixel-integrated
+    contrast, the threshold centroid) — and ``dorsch`` — the optical limit, ``C = 1`` and each
+    view's own aperture."""
+    from lts360.design.model import Conditions, evaluate
+    from lts360.design.params import DesignSpace
+
+    space = DesignSpace.create(rig)
+    return {sk: float(evaluate(space, None, Conditions(diameters_mm=(diameter_mm,), n_theta=360,
+                                                       speckle=sk),
+                               gradient=False).speckle_rms_um[0])
+            for sk in ("pixel", "dorsch")}
 
 
 @functools.lru_cache(maxsize=16)
@@ -386,6 +408,7 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
     from lts360.scenes.rig_io import load_rig
 
     summary["dorsch"] = dorsch_speckle_limit_um(load_rig(rig))
+    summary["speckle_model_point_um"] = speckle_point_prediction_um(load_rig(rig))
     import xarray as xr
 
     sp = xr.open_dataset(out / "only-speckle" / "batch_000" / "results.nc")
@@ -464,8 +487,14 @@ def format_mc(s: dict) -> str:
                      f"{s.get('placement_mm', DEFAULT_PLACEMENT_MM):g} mm): offset, trials, mean y")
         for b in s["by_offset"]:
             lines.append(f"  {b['offset_mm']:.3f} mm  {b['n']:5d}  {b['mean_um']:+7.2f} µm")
-    lines.append(f"speckle limit (Dorsch et al. 1994), per point: δz = {d['delta_z_um']:.1f} µm "
-                 f"(C = {d['contrast']:.3f}, sin u = {d['sin_u_obs']:.4f}, θ = "
-                 f"{d['triangulation_deg']:.0f}°); simulated speckle-only point scatter "
-                 f"{s['speckle_point_std_um']:.1f} µm")
+    lines.append(f"speckle limit (Dorsch et al. 1994), per point at the direct view's aim: "
+                 f"δz = {d['delta_z_um']:.1f} µm (C = {d['contrast']:.3g}, sin u = "
+                 f"{d['sin_u_obs']:.4f}, θ = {d['triangulation_deg']:.0f}°)")
+    pm = s.get("speckle_model_point_um")
+    if pm:
+        lines.append(f"speckle per point, rms over the section (design model): "
+                     f"{pm['pixel']:.1f} µm (the simulator's pixel speckle, contrast "
+                     f"{d.get('pixel_contrast', float('nan')):.3f}, threshold centroid), "
+                     f"{pm['dorsch']:.1f} µm (Dorsch's optical limit, each view's aperture)")
+    lines.append(f"simulated speckle-only point scatter {s['speckle_point_std_um']:.1f} µm")
     return "\n".join(lines)

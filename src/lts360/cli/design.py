@@ -1,0 +1,175 @@
+"""``lts360 design optimize|map``: rig design on the differentiable model (lts360.design)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+from lts360.cli.usage import UsageError
+
+
+def _floats(text: str, what: str) -> tuple[float, ...]:
+    try:
+        vals = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise UsageError(f"{what}: expected comma-separated numbers, got {text!r}") from None
+    if not vals:
+        raise UsageError(f"{what}: expected at least one number")
+    return vals
+
+
+def _bounds(items) -> dict:
+    out = {}
+    for item in items or []:
+        name, sep, rng = item.partition("=")
+        lo, sep2, hi = rng.partition(":")
+        if not sep or not sep2:
+            raise UsageError(f"--bound: expected NAME=LO:HI, got {item!r}")
+        try:
+            out[name.strip()] = (float(lo), float(hi))
+        except ValueError:
+            raise UsageError(f"--bound {item!r}: LO and HI must be numbers") from None
+    return out
+
+
+def _space_and_conditions(args):
+    from lts360.design.model import Conditions
+    from lts360.design.params import DesignSpace
+
+    free = None if args.free is None else [f.strip() for f in args.free.split(",") if f.strip()]
+    space = DesignSpace.create(args.rig, free=free, bounds=_bounds(args.bound))
+    cond = Conditions(diameters_mm=_floats(args.diameters_mm, "--diameters-mm"),
+                      placement_mm=args.placement_mm, min_coverage_deg=args.min_coverage_deg,
+                      min_overlap_deg=args.min_overlap_deg, margin_px=args.image_margin_px,
+                      speckle=args.speckle, n_theta=args.n_theta)
+    return space, cond
+
+
+def _write_dir(out: Path, files: dict[str, str | bytes]) -> None:
+    """Write ``files`` into a new folder and put it at ``out`` in one rename (replacing it)."""
+    out = Path(out)
+    parent = out.resolve().parent
+    if not parent.is_dir():
+        raise UsageError(f"--out: directory {str(parent)!r} does not exist")
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=parent))
+    try:
+        for name, data in files.items():
+            (tmp / name).write_bytes(data if isinstance(data, bytes) else data.encode())
+        old = None
+        if out.exists():
+            old = parent / f".{out.name}.old-{os.getpid()}"
+            out.rename(old)
+        tmp.rename(out)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def cmd_design_optimize(args) -> int:
+    from lts360.design.optimize import optimize, report_dict, report_text
+
+    if args.starts < 1:
+        raise UsageError(f"--starts: must be >= 1, got {args.starts}")
+    if not 2 <= args.grid_per_axis <= 10:
+        raise UsageError(f"--grid-per-axis: must be in [2, 10], got {args.grid_per_axis}")
+    if args.grid_points < args.starts:
+        raise UsageError("--grid-points: must be >= --starts")
+    space, cond = _space_and_conditions(args)
+    t0 = time.perf_counter()
+    res = optimize(space, cond, starts=args.starts, points_per_axis=args.grid_per_axis,
+                   max_grid_points=args.grid_points, seed=args.seed, progress=print)
+    text = report_text(res)
+    rep = report_dict(res)
+    rep["seconds"] = time.perf_counter() - t0
+    toml = space.toml(res.optimum.x, name=f"{space.base.name}-optimized")
+    _write_dir(Path(args.out), {"rig.toml": toml, "report.json": json.dumps(rep, indent=2),
+                                "report.txt": text + "\n"})
+    print(text)
+    print(f"wrote {args.out}/rig.toml, report.json, report.txt "
+          f"({rep['seconds']:.1f} s)")
+    return 0
+
+
+def cmd_design_map(args) -> int:
+    from lts360.design.maps import QUANTITIES, design_map, plot_map
+
+    if args.quantity not in QUANTITIES:
+        raise UsageError(f"--quantity: one of {', '.join(QUANTITIES)}, got {args.quantity!r}")
+    if not 2 <= args.n <= 400:
+        raise UsageError(f"--n: must be in [2, 400], got {args.n}")
+    if args.x == args.y:
+        raise UsageError("--x and --y must be different parameters")
+    out = Path(args.out)
+    if out.suffix.lower() != ".png":
+        raise UsageError(f"--out: must be a .png file, got {args.out!r}")
+    if not out.resolve().parent.is_dir():
+        raise UsageError(f"--out: directory {str(out.resolve().parent)!r} does not exist")
+    args.free = f"{args.x},{args.y}"
+    space, cond = _space_and_conditions(args)
+    t0 = time.perf_counter()
+    m = design_map(space, args.x, args.y, cond, n=args.n)
+    base = space.base_x()
+    tmp = out.with_name(f".{out.name}.tmp.png")
+    try:
+        plot_map(m, args.quantity, tmp, base_xy=(base[0], base[1]),
+                 min_coverage_deg=cond.min_coverage_deg)
+        tmp.replace(out)
+    finally:
+        tmp.unlink(missing_ok=True)
+    print(f"{args.n}×{args.n} designs of the model in {time.perf_counter() - t0:.1f} s; "
+          f"wrote {out}")
+    return 0
+
+
+def add_design_parser(sub) -> None:
+    from lts360.design.params import PARAMETERS
+
+    s = sub.add_parser("design", help="rig design on the differentiable model: optimize, map")
+    ds = s.add_subparsers(dest="design_command", metavar="ACTION", parser_class=type(s))
+    ds.required = True
+    names = ", ".join(p.name for p in PARAMETERS)
+
+    def common(q):
+        q.add_argument("--rig", default="paper", help="base rig: preset or TOML (fixes every "
+                       "parameter that is not free)")
+        q.add_argument("--bound", action="append", metavar="NAME=LO:HI",
+                       help="search bounds of a free parameter (repeatable)")
+        q.add_argument("--diameters-mm", default="10,20,30", help="section diameters; the "
+                       "objective is the worst (default 10,20,30)")
+        q.add_argument("--placement-mm", type=float, default=0.0, help="also the centre "
+                       "offset by this much in ±x, ±y")
+        q.add_argument("--min-coverage-deg", type=float, default=359.0)
+        q.add_argument("--min-overlap-deg", type=float, default=5.0,
+                       help="direct/mirror and mirror/mirror overlap")
+        q.add_argument("--image-margin-px", type=float, default=20.0)
+        q.add_argument("--speckle", default="pixel", choices=("pixel", "dorsch"))
+        q.add_argument("--n-theta", type=int, default=180, help="θ samples of the model")
+
+    q = ds.add_parser("optimize", help="multi-start L-BFGS-B on the model, seeded by a grid "
+                      "of it; writes rig.toml and a report")
+    q.add_argument("--out", required=True, help="output directory (replaced atomically)")
+    q.add_argument("--free", default=None, help=f"comma-separated free parameters (default "
+                   f"all: {names})")
+    q.add_argument("--starts", type=int, default=6)
+    q.add_argument("--grid-per-axis", type=int, default=3)
+    q.add_argument("--grid-points", type=int, default=1024,
+                   help="most grid designs (a seeded subset of the full grid)")
+    q.add_argument("--seed", type=int, default=0)
+    common(q)
+    q.set_defaults(func=cmd_design_optimize)
+
+    q = ds.add_parser("map", help="a two-parameter map of the model (PNG)")
+    q.add_argument("--x", required=True, help=f"parameter on x ({names})")
+    q.add_argument("--y", required=True, help="parameter on y")
+    q.add_argument("--n", type=int, default=100, help="grid points per axis")
+    q.add_argument("--quantity", default="U_um", help="U_um, point_rms_um, coverage_deg, "
+                   "objective")
+    q.add_argument("--out", default="design-map.png")
+    common(q)
+    q.set_defaults(func=cmd_design_map)

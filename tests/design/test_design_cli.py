@@ -1,0 +1,71 @@
+"""``lts360 design``: bad input (one line, exit 2, nothing written), a map, a small optimisation."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from lts360.cli import main
+from lts360.scenes.rig_io import load_rig
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--free", "alpha,beta_deg"], "unknown design parameter 'alpha'"),
+    (["--bound", "alpha_deg=5:50"], "bounds of alpha_deg: (5, 50) outside the valid range"),
+    (["--bound", "alpha_deg=50"], "expected NAME=LO:HI"),
+    (["--diameters-mm", "20,x"], "comma-separated numbers"),
+    (["--diameters-mm", "-3"], "diameters_mm: must be positive"),
+    (["--min-coverage-deg", "400"], "min_coverage_deg: must be in [0, 360]"),
+])
+def test_optimize_bad_input(tmp_path, capsys, argv, message):
+    out = tmp_path / "out"
+    assert main(["design", "optimize", "--out", str(out), *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and "\n" not in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_map_bad_input(tmp_path, capsys):
+    assert main(["design", "map", "--x", "alpha_deg", "--y", "alpha_deg",
+                 "--out", str(tmp_path / "m.png")]) == 2
+    assert main(["design", "map", "--x", "alpha_deg", "--y", "beta_deg", "--n", "1",
+                 "--out", str(tmp_path / "m.png")]) == 2
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow  # ~10 s: records the batched and the gradient models
+def test_optimize_writes_a_loadable_rig_and_the_report(tmp_path, capsys):
+    out = tmp_path / "opt"
+    rc = main(["design", "optimize", "--out", str(out), "--free", "alpha_deg,f_number",
+               "--starts", "2", "--grid-per-axis", "3", "--n-theta", "90",
+               "--diameters-mm", "20"])
+    assert rc == 0
+    rig = load_rig(out / "rig.toml")
+    rep = json.loads((out / "report.json").read_text())
+    labels = [d["label"] for d in rep["designs"]]
+    assert labels == ["base rig", "grid best", "gradient optimum"]
+    opt = rep["designs"][2]
+    assert opt["hard"]["ok"]
+    assert opt["objective_um"] <= rep["designs"][1]["objective_um"] + 1e-9
+    assert rig.design.alpha_deg == pytest.approx(opt["parameters"]["alpha_deg"])
+    assert "gradient optimum" in (out / "report.txt").read_text()
+
+
+@pytest.mark.slow  # ~5 s: records the batched model
+def test_map_writes_a_png(tmp_path):
+    out = tmp_path / "m.png"
+    assert main(["design", "map", "--x", "alpha_deg", "--y", "beta_deg", "--n", "12",
+                 "--n-theta", "90", "--out", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.slow  # ~10 s: records the batched and the gradient models
+def test_optimize_infeasible_constraints_exit_2_and_write_nothing(tmp_path, capsys):
+    out = tmp_path / "opt"
+    rc = main(["design", "optimize", "--out", str(out), "--free", "alpha_deg,beta_deg",
+               "--min-overlap-deg", "60", "--starts", "2", "--n-theta", "90",
+               "--diameters-mm", "20"])
+    assert rc == 2
+    assert "no start reached a valid rig" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
