@@ -7,7 +7,7 @@ in a mirror, boards in mirror shots refined by their image model, the line fitte
 model): fx −0.15 % (σ reported by OpenCV ~0.5 %: ten half-resolution images determine the
 camera poorly), mirrors 0.014/0.053° and +110/+61 µm (the focal-length error scales every
 depth), laser plane 0.026° and +121 µm, frame origin 0.14 mm (2026-11-23, all shots at 16 spp:
-mirrors 0.014/0.060°, +130/+90 µm, laser 0.005°, +54 µm; third session, laser boards seen
+mirrors 0.014/0.060°, +130/+90 µm, laser 0.005°, +54 µm; earlier, with the laser boards seen
 directly only: laser 0.14°, origin 0.35 mm).  The
 tolerances below are two to five times those figures: they guard the pipeline (handedness,
 corner order, frames, signs — an error there costs degrees and millimetres), not the accuracy
