@@ -43,7 +43,7 @@ not a formula), so a batch of 10⁴ would take about an hour on two cores — th
 The §4.4 compensation is part of the measurement procedure, so every trial measures with a
 compensated calibration, compensated the same way: the nominal calibration (the file given,
 whatever view offsets it holds) is compensated once at the reference placement, a drawn one
-anew (:func:`_compensate`).  Before commit 586c8e2 the nominal trials used the offsets of
+anew (:func:`_compensate`).  Earlier versions of the study took, for the nominal trials, the offsets of
 the file given — the command line's compensation, on a centred gauge imaged with realistic
 noise — while drawn ones were compensated on the noise-free reference placement: the
 calibration-only run's mean sat 9 µm from the others'.  That gap is one compensation's own
