@@ -58,7 +58,6 @@ def test_a_still_object_renders_bit_identically(variant, paper):
 
 def test_a_feed_along_a_straight_cylinder_changes_nothing(variant, paper):
     # Global shutter, 1 m/s over 1 ms: the section slides 1 mm along a straight gauge.
-    from lts360.simulator.frame import simulate_frame
     from lts360.simulator.motion import simulate_moving_frame
 
     obj = build_object("plug-gauge")
@@ -166,18 +165,24 @@ def test_rolling_shutter_shifts_each_view_of_a_tilted_cylinder_as_predicted(vari
         t = project_meas_points(pts, cal, view)[:, 1] * line + 0.5 * E
         c_frozen = centre(pts[:, :2])
         c_meas = centre(res_m[name].points_meas_mm[res_m[name].valid, :2])
-        # The view's section as a still frame shows it at the mean time of its rows.
-        at_t = measure(simulate_moving_frame(paper, obj, still, t_trigger_s=float(t.mean()),
-                                             freeze=True, **kw))[name]
-        c_still = centre(at_t.points_meas_mm[at_t.valid, :2])
-        move = np.linalg.norm(c_still - c_frozen)
+        c_pred = centre(pts[:, :2] - np.outer(v * t / a[2], a[:2]))
+        if name == "direct":
+            # The direct view follows a pure translation of the tilted section exactly
+            # (0.1288 mm read for 0.1287 mm, global shutter): the closed form.
+            expected = c_pred
+        else:
+            # The mirror views' fit of the tilted section moves 5–10 % less than the section
+            # (a measurement effect, not timing): a still frame at the mean time of the view's
+            # rows shows that response; the spread of the rows' times about the mean (a shear)
+            # is added in closed form from the frozen points.
+            at_t = measure(simulate_moving_frame(paper, obj, still, freeze=True,
+                                                 t_trigger_s=float(t.mean()), **kw))[name]
+            c_mean = centre(pts[:, :2] - v * t.mean() / a[2] * a[:2])
+            expected = centre(at_t.points_meas_mm[at_t.valid, :2]) + (c_pred - c_mean)
+        move = np.linalg.norm(expected - c_frozen)
         assert move > 0.1  # mm: the test sees the effect
-        assert np.linalg.norm(c_meas - c_still) < 0.05 * move, (name, c_meas - c_frozen,
-                                                                 c_still - c_frozen)
-        if name == "direct":  # and in closed form (the mirror views' fit of a tilted section
-            # moves by up to 13 % less than the section: a measurement effect, not timing)
-            c_pred = centre(pts[:, :2] - np.outer(v * t / a[2], a[:2]))
-            assert np.linalg.norm(c_meas - c_pred) < 0.05 * np.linalg.norm(c_pred - c_frozen)
+        assert np.linalg.norm(c_meas - expected) < 0.05 * move, (name, c_meas - c_frozen,
+                                                                  expected - c_frozen)
 
 
 def test_measure_tags_each_point_with_its_rows_time_and_z(variant, paper, tmp_path):
