@@ -137,3 +137,15 @@ def test_inspect_reads_clouds_and_nominals_never_the_simulator():
     below = {t for layer in ("lts360.geometry", "lts360.scenes", "lts360.recon")
              for t in _imports_of(layer) if t.startswith("lts360.inspect")}
     assert below == set()
+
+
+def test_twin_sits_above_recon_and_simulator_and_reads_no_truth():
+    """The twin composes the simulator and the reconstruction; it never reads ground truth
+    (experiments, the score) and nothing below it imports it (recon offers a hook instead)."""
+    bad = {t for t in _imports_of("lts360.twin")
+           if t.split(".")[1] in ("experiments", "cli", "inspect", "design")}
+    assert bad == set()
+    below = {t for layer in ("lts360.geometry", "lts360.scenes", "lts360.simulator",
+                             "lts360.recon", "lts360.inspect", "lts360.design")
+             for t in _imports_of(layer) if t.startswith("lts360.twin")}
+    assert below == set()

@@ -244,6 +244,9 @@ def cmd_measure(args) -> int:
     if args.compensate and not any(np.any(v) for v in cal.view_offsets_mm.values()):
         raise UsageError(f"--compensate: {args.calibration} has no view offsets (paper §4.4); "
                          f"make them with `lts360 compensate`")
+    twin = None
+    if args.bias_model == "twin":
+        twin = _twin_corrector(args, cal)
     sections = collect_sections(args.inputs, pitch_mm=args.pitch_mm)
     out = Path(args.out)
     if not out.parent.exists():
@@ -256,14 +259,15 @@ def cmd_measure(args) -> int:
             sections, cal, theta_step_deg=args.theta_step_deg, r_step_mm=args.r_step_mm,
             half_width_mm=args.band_mm, peak=args.peak, compensate=args.compensate,
             backend=args.backend, progress=progress, continuity_k=args.continuity_k,
-            reject=args.reject == "on")
+            reject=args.reject == "on", correct=twin)
         searched = log.describe()
     else:
         grid = CylGrid.from_ranges((radius - band_mm, radius + band_mm),
                                    theta_step_deg=args.theta_step_deg, r_step_mm=args.r_step_mm)
         cloud = measure_sections(sections, cal, grid, peak=args.peak, compensate=args.compensate,
                                  backend=args.backend, method=args.method, progress=progress,
-                                 continuity_k=args.continuity_k, reject=args.reject == "on")
+                                 continuity_k=args.continuity_k, reject=args.reject == "on",
+                                 correct=twin)
     dt = time.perf_counter() - t0
     coverages = section_coverage(cloud, grid, n_sections=len(sections),
                                  windows_in_cloud=args.method == "inverse")
@@ -272,7 +276,7 @@ def cmd_measure(args) -> int:
     if not valid.any():  # nothing to write: an empty cloud is no measurement
         print(f"lts360: measure: {refused}; nothing written", file=sys.stderr)
         return 3
-    write_cloud(out, cloud)
+    write_cloud(out, cloud, comments=() if twin is None else _twin_comments(twin))
     what = f"peak {args.peak}" if args.method == "inverse" else "classic (Steger 2-D)"
     print(f"{len(sections)} section(s), grid {grid.n_theta} θ × {grid.n_r} r, {what}: "
           f"{int(valid.sum())} valid points of {len(cloud)} θ samples in {dt:.2f} s -> {out}")
@@ -282,10 +286,40 @@ def cmd_measure(args) -> int:
     flagged = _flag_counts(cloud)
     if flagged:
         print("  not measured: " + ", ".join(f"{n} {name}" for name, n in flagged))
+    if twin is not None:
+        print("  " + twin.log.describe())
+        skipped = [k for k, s in enumerate(twin.log.sections) if s["skipped"]]
+        if skipped:
+            print(f"  twin: {len(skipped)} section(s) not corrected (too few points): "
+                  f"{skipped[:10]}")
     if refused is not None:
         print(f"lts360: measure: {refused}; the cloud is written with its flags", file=sys.stderr)
         return 3
     return 0
+
+
+def _twin_corrector(args, cal):
+    """The ``--bias-model twin`` hook, or a usage error naming what is wrong."""
+    from lts360.scenes.rig_io import load_rig
+    from lts360.twin import TwinCorrector
+
+    if args.method != "inverse":
+        raise UsageError("--bias-model twin: needs the inverse method (the twin is measured "
+                         "with the real image's plan)")
+    if not 1 <= args.twin_spp <= 4096:
+        raise UsageError(f"--twin-spp: must be in [1, 4096], got {args.twin_spp}")
+    try:
+        return TwinCorrector(cal, load_rig(args.twin_rig), material=args.twin_material,
+                             spp=args.twin_spp)
+    except (ValueError, KeyError, FileNotFoundError) as exc:
+        raise UsageError(f"--bias-model twin: {exc}") from None
+
+
+def _twin_comments(twin) -> list[str]:
+    """PLY header lines: the bias the twin removed per view (µm) and its render uncertainty."""
+    return [f"lts360 twin {name} bias_um {v['mean_bias_um']:+.3f} corrected {v['n_corrected']} "
+            f"uncorrected {v['n_uncorrected']} u_render_um {v['u_render_um']:.3f}"
+            for name, v in twin.log.summary().items()]
 
 
 def _flag_counts(cloud) -> list[tuple[str, int]]:

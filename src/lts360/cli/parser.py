@@ -19,6 +19,7 @@ from lts360.cli.commands import (
 from lts360.cli.studies import (
     cmd_demo,
     cmd_study_algorithms,
+    cmd_study_bias,
     cmd_study_design_space,
     cmd_study_examples,
     cmd_study_line_speed,
@@ -129,6 +130,21 @@ def build_parser() -> argparse.ArgumentParser:
                    help="refuse (exit 3) a section that measures less than this share of the "
                         "θ coverage its views predict (default 0.5); a section with no valid "
                         "point is always refused")
+    s.add_argument("--bias-model", choices=("none", "twin"), default="none",
+                   help="twin: correct the line-centre bias by measuring each section's digital "
+                        "twin (its measured profile rendered noise-free through the calibrated "
+                        "rig with --twin-rig's optics, laser and sensor) with the same plan and "
+                        "subtracting its error per view and θ; adds ~1-3 s per section "
+                        "(default none)")
+    s.add_argument("--twin-rig", default="paper",
+                   help="rig file (preset or TOML) whose optics, laser, sensor and mirror "
+                        "extents the twin uses; its geometry comes from --calibration "
+                        "(default paper)")
+    s.add_argument("--twin-material", default="ground-steel",
+                   help="the twin's surface (see lts360 objects; default ground-steel, the plug "
+                        "gauge's)")
+    s.add_argument("--twin-spp", type=int, default=64,
+                   help="samples per pixel of the twin's render (default 64)")
     s.set_defaults(func=cmd_measure)
 
     s = sub.add_parser("compensate", help="residual compensation (paper §4.4): the mirror "
@@ -294,6 +310,18 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--scale", type=float, default=0.5, help="image scale (default 0.5)")
     q.add_argument("--rig", default="paper")
     q.set_defaults(func=cmd_study_line_speed)
+
+    q = study_parser("bias", "the plug gauge's line-centre bias over diameters and placements, "
+                     "as measured and corrected by the digital twin (true calibration, no "
+                     "radius given)")
+    q.add_argument("--diameters-mm", default="6,12,20,28", help="comma-separated")
+    q.add_argument("--placements-mm", default="0:0,3:0,0:-3",
+                   help="comma-separated x:y offsets from the axis")
+    q.add_argument("--noise", choices=("none", "realistic"), default="none")
+    q.add_argument("--spp", type=int, default=16)
+    q.add_argument("--twin-spp", type=int, default=64)
+    q.add_argument("--rig", default="paper")
+    q.set_defaults(func=cmd_study_bias)
 
     q = study_parser("design-space", "α/β sweep: coverage, overlap, multiple reflections, "
                      "Monte Carlo radius uncertainty, heat maps, optimum")

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from lts360.cli.usage import UsageError, _set_variant
 
 
@@ -244,4 +246,35 @@ def cmd_study_line_speed(args) -> int:
         raise UsageError(f"line-speed: {exc}")
     print(format_line_speed(table))
     print(f"wrote {args.out}/ (table.txt, table.json, line-speed.png, trials/results.nc)")
+    return 0
+
+
+def cmd_study_bias(args) -> int:
+    from lts360.experiments.bias_study import format_bias_table, run_bias_study
+
+    common = _study_common(args)
+    diameters = _floats(args.diameters_mm, "--diameters-mm", positive=True)
+    placements = []
+    for item in args.placements_mm.split(","):
+        try:
+            x, y = (float(v) for v in item.split(":"))
+        except ValueError:
+            raise UsageError(f"--placements-mm: x:y pairs separated by commas, got {item!r}") \
+                from None
+        if not (np.isfinite(x) and np.isfinite(y) and np.hypot(x, y) <= 20):
+            raise UsageError(f"--placements-mm: offsets within 20 mm of the axis, got {item!r}")
+        placements.append((x, y))
+    if any(not 1 <= d <= 60 for d in diameters):
+        raise UsageError(f"--diameters-mm: each in [1, 60] mm, got {args.diameters_mm!r}")
+    for name in ("spp", "twin_spp"):
+        if not 1 <= getattr(args, name) <= 4096:
+            raise UsageError(f"--{name.replace('_', '-')}: must be in [1, 4096], got "
+                             f"{getattr(args, name)}")
+    _study_rig(args.rig)
+    _set_variant(args.variant)
+    table = run_bias_study(args.out, diameters_mm=diameters, placements_mm=placements,
+                           spp=args.spp, twin_spp=args.twin_spp, noise=args.noise, rig=args.rig,
+                           workers=args.workers or 1, variant=args.variant, **common)
+    print(format_bias_table(table))
+    print(f"wrote {args.out}/ (table.txt, table.json, trials/results.nc)")
     return 0

@@ -173,6 +173,7 @@ def render_pixels(spec: SceneSpec, pixels_xy, *, spp: int = 4, seed: int = 0, sc
         return z, z.copy(), 0.0
     t0 = time.perf_counter()
     smp = sensor.sampler()
+    spp = int(smp.sample_count())  # as the sampler rounded it (multijitter: 32 -> 35)
     smp.set_samples_per_wavefront(spp)
     smp.seed(dr.opaque(mi.UInt32, seed), n * spp)
     lane_px = dr.arange(mi.UInt32, n * spp) // spp

@@ -64,6 +64,10 @@ class Section:
     image_path: Path
     z_mm: float
     timing: RowTiming | None = None
+    image: np.ndarray | None = None  # the image itself, when it is not read from image_path
+
+    def read(self) -> np.ndarray:
+        return read_image(self.image_path) if self.image is None else self.image
 
 
 def read_image(path: Path) -> np.ndarray:
@@ -232,10 +236,11 @@ def make_runner(cal: Calibration, *, peak: str = "centroid", backend: str = "aut
 def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *,
                      peak: str = "centroid", compensate: bool = False, backend: str = "auto",
                      method: str = "inverse", progress=None,
-                     continuity_k: float | None = None, reject: bool = False) -> Cloud:
+                     continuity_k: float | None = None, reject: bool = False,
+                     correct=None) -> Cloud:
     """Inverse triangulation of every section with one plan (a band given by the user).
 
-    ``backend``: see :func:`make_runner`.
+    ``backend``: see :func:`make_runner`.  ``correct``: see :func:`measure_sections_following`.
     """
     if method == "classic":
         from lts360.recon.triangulation.classic import classic_triangulate, view_regions
@@ -243,19 +248,21 @@ def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *
         regions = view_regions(cal, grid)
         items = list(enumerate(sections))
         return Cloud.concatenate([
-            classic_to_cloud(classic_triangulate(read_image(s.image_path), cal, grid, regions=regions),
+            classic_to_cloud(classic_triangulate(s.read(), cal, grid, regions=regions),
                              z_mm=s.z_mm, section=k)
             for k, s in (progress(items) if progress else items)])
     if method != "inverse":
         raise ValueError(f"method must be 'inverse' or 'classic', got {method!r}")
+    plan = plan_inverse(cal, grid, precompute=False)
     measure = make_runner(cal, peak=peak, backend=backend, compensate=compensate,
-                          continuity_k=continuity_k, reject=reject)(
-        plan_inverse(cal, grid, precompute=False))
+                          continuity_k=continuity_k, reject=reject)(plan)
     clouds = []
     items = list(enumerate(sections))
     for k, s in (progress(items) if progress else items):
-        clouds.append(result_to_cloud(measure(read_image(s.image_path)), z_mm=s.z_mm, section=k,
-                                      timing=s.timing, cal=cal))
+        res = measure(s.read())
+        if correct is not None:
+            res = correct(res, measure, plan)
+        clouds.append(result_to_cloud(res, z_mm=s.z_mm, section=k, timing=s.timing, cal=cal))
     return Cloud.concatenate(clouds)
 
 
@@ -313,7 +320,8 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
                                half_width_mm: float | None = None, peak: str = "centroid",
                                compensate: bool = False, backend: str = "auto",
                                progress=None, continuity_k: float | None = None,
-                               reject: bool = False) -> tuple[Cloud, CylGrid, BandLog]:
+                               reject: bool = False,
+                               correct=None) -> tuple[Cloud, CylGrid, BandLog]:
     """Inverse triangulation with the radial band found from the image.
 
     The first section runs the coarse pass (:class:`lts360.recon.triangulation.band.BandSearch`) and
@@ -323,6 +331,10 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
     A section where the coarse pass finds no stripe is measured on the last band (or, for the
     first, on a band about the middle of the measurable radii), so that its rows say what was
     searched.
+
+    ``correct``: an optional ``(result, measure, plan) -> result`` applied to each section's
+    result, given the measuring function and plan that made it (a model-based line-centre bias
+    correction, :mod:`lts360.twin`, measures its own synthetic image with the same plan).
 
     Returns
     -------
@@ -347,7 +359,7 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
     clouds = []
     items = list(enumerate(sections))
     for k, s in (progress(items) if progress else items):
-        img = read_image(s.image_path)
+        img = s.read()
         res = None
         if current is not None:
             t = time.perf_counter()
@@ -380,14 +392,16 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
                                     windows=profile_windows(cal, grid, profile))
                 measure = runner(plan)
                 log.plan_s += time.perf_counter() - t
-                current = (grid, measure, 0)
+                current = (grid, measure, 0, plan)
             t = time.perf_counter()
             res = current[1](img)
             log.fine_s += time.perf_counter() - t
             n_valid = sum(int(v.valid.sum()) for v in res.views.values())
-            current = (current[0], current[1], n_valid)
+            current = (current[0], current[1], n_valid, current[3])
         else:
             log.found.append(True)
         log.r_range_mm.append(current[0].r_range_mm)
+        if correct is not None:
+            res = correct(res, current[1], current[3])
         clouds.append(result_to_cloud(res, z_mm=s.z_mm, section=k, timing=s.timing, cal=cal))
     return Cloud.concatenate(clouds), current[0], log

@@ -1,0 +1,206 @@
+"""Model-based line-centre bias correction: measure the twin of the section with the same
+plan, and subtract what the chain does to a profile whose radii are known exactly.
+
+For each section: the measured points give a closed profile (:mod:`lts360.twin.profile`); its
+prism is rendered noise-free through the calibrated rig with the rig file's optics
+(:mod:`lts360.twin.rig`), only on the pixels the plan reads; the twin image is measured by the
+very function (same grid, windows, detector, compensation, rejection) that measured the real
+image.  Per view and θ the bias is ``b = r_twin_measured − r_twin_exact`` (the exact radius of
+the prism along the same ray), smoothed along θ over ``smooth_deg`` (the twin's render noise),
+and the real radii become ``r − b``.  A valid point farther than ``smooth_deg / 2`` from any
+twin estimate of its view keeps its radius and is counted as uncorrected.
+
+What the correction cannot know is what the twin does not model: the real surface's micro-
+structure and material beyond the chosen BSDF, optics that differ from the rig file, and the
+geometry between the sections (the prism is straight).  ``u_render_um`` is the standard
+uncertainty the twin's render noise leaves in the correction; the rest belongs to a type-B
+budget (see docs/reconstruction.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lts360.recon.calibration.model import Calibration
+from lts360.scenes.materials import get_material
+from lts360.scenes.rig import Rig
+from lts360.twin.profile import prism_mesh, ray_radii, section_profile
+from lts360.twin.rig import twin_rig
+
+__all__ = ["TwinCorrector", "TwinLog", "DEFAULT_TWIN_SPP", "DEFAULT_SMOOTH_DEG"]
+
+DEFAULT_TWIN_SPP = 64
+DEFAULT_SMOOTH_DEG = 3.0
+#: The twin's default render seed: not a frame's usual seed (a twin sharing the real render's
+#: sample pattern would cancel that render's sampling noise, which no real image has).
+TWIN_SEED = 0x7717
+
+
+@dataclass
+class TwinLog:
+    """What the correction did, one entry per section: per view the mean bias removed (µm),
+    its spread along θ, the corrected and uncorrected point counts and ``u_render_um``."""
+
+    sections: list = field(default_factory=list)
+    render_s: float = 0.0
+    measure_s: float = 0.0
+
+    def summary(self) -> dict:
+        """Per view over all sections: mean bias (µm), points corrected and uncorrected."""
+        out: dict = {}
+        for sec in self.sections:
+            for name, d in sec["views"].items():
+                o = out.setdefault(name, {"bias_sum_um": 0.0, "n_corrected": 0,
+                                          "n_uncorrected": 0, "u_render_um": 0.0})
+                o["bias_sum_um"] += d["mean_bias_um"] * d["n_corrected"]
+                o["n_corrected"] += d["n_corrected"]
+                o["n_uncorrected"] += d["n_uncorrected"]
+                o["u_render_um"] = max(o["u_render_um"], d["u_render_um"])
+        for o in out.values():
+            o["mean_bias_um"] = o.pop("bias_sum_um") / max(o["n_corrected"], 1)
+        return out
+
+    def describe(self) -> str:
+        s = self.summary()
+        return "twin bias correction: " + ", ".join(
+            f"{k} {v['mean_bias_um']:+.2f} µm ({v['n_corrected']} pts"
+            + (f", {v['n_uncorrected']} uncorrected" if v["n_uncorrected"] else "") + ")"
+            for k, v in s.items()) + f"; render {self.render_s:.1f} s"
+
+
+def _nan_smooth(values: np.ndarray, size: int, wrap: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Moving mean of the finite values over ``size`` samples; (mean, count) per sample."""
+    from scipy.ndimage import uniform_filter1d
+
+    ok = np.isfinite(values)
+    mode = "wrap" if wrap else "constant"
+    s = uniform_filter1d(np.where(ok, values, 0.0), size, mode=mode)
+    n = uniform_filter1d(ok.astype(float), size, mode=mode)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = s / n
+    count = np.rint(n * size)
+    return np.where(count > 0, mean, np.nan), count
+
+
+@dataclass
+class TwinCorrector:
+    """A ``correct`` hook for :func:`lts360.recon.triangulation.measure.measure_sections_following`
+    (and :func:`~lts360.recon.triangulation.measure.measure_sections`).
+
+    Attributes
+    ----------
+    cal : Calibration
+        The calibration the real image is measured with (the twin's geometry).
+    design : Rig
+        The rig file: optics, laser, sensor of the twin.
+    material : str
+        The twin's surface (:mod:`lts360.scenes.materials`).
+    spp, seed : int
+        The twin's render (noise-free; ``spp`` ≥ 64 for µm work); section ``k`` of a scan
+        renders with ``seed + k``.
+    smooth_deg : float
+        Smoothing of the bias along θ (and its reach across twin gaps).
+    half_length_mm : float
+        Half-length of the twin prism along the axis.
+    """
+
+    cal: Calibration
+    design: Rig
+    material: str = "ground-steel"
+    spp: int = DEFAULT_TWIN_SPP
+    seed: int = TWIN_SEED
+    smooth_deg: float = DEFAULT_SMOOTH_DEG
+    half_length_mm: float = 30.0
+    log: TwinLog = field(default_factory=TwinLog)
+
+    def __post_init__(self) -> None:
+        get_material(self.material)  # fails with the list of materials
+        if isinstance(self.spp, bool) or not isinstance(self.spp, (int, np.integer)) \
+                or self.spp < 1:
+            raise ValueError(f"twin spp must be an integer >= 1, got {self.spp!r}")
+        if not 0 < self.smooth_deg <= 30:
+            raise ValueError(f"twin smooth_deg must be in (0, 30], got {self.smooth_deg}")
+        self.rig = twin_rig(self.cal, self.design)
+
+    # -- the twin image ----------------------------------------------------------------------
+    def render(self, profile, pixels_xy: np.ndarray, *, seed: int,
+               exposure_fraction: float) -> np.ndarray:
+        """The twin's noise-free digital image (only ``pixels_xy`` rendered)."""
+        import mitsuba as mi
+
+        from lts360.simulator.frame import sensor_image
+        from lts360.simulator.materials import material_to_bsdf
+        from lts360.simulator.render import default_variant, render_radiance_pixels
+        from lts360.simulator.scene import SceneSpec
+
+        if mi.variant() is None:
+            mi.set_variant(default_variant())
+        mesh = prism_mesh(profile, half_length_mm=self.half_length_mm)
+        spec = SceneSpec(self.rig, (("object", mesh,
+                                     material_to_bsdf(get_material(self.material))),))
+        res = render_radiance_pixels(spec, pixels_xy, spp=int(self.spp), seed=int(seed),
+                                     scale=1.0, max_bounces=2, thin_lens=True, laser_on=True)
+        image, _, _ = sensor_image(self.rig, res, noise="none",
+                                   exposure_fraction=exposure_fraction)
+        return image
+
+    def _exposure_fraction(self, result) -> float:
+        """The real image's stripe brightness as a fraction of full scale (the twin is exposed
+        to match: saturation and the detector's threshold then act alike)."""
+        full = float(2 ** self.design.sensor.bit_depth - 1)
+        vals = np.concatenate([v.intensity[v.valid] for v in result.views.values()])
+        if vals.size == 0:
+            return 0.8
+        return float(np.clip(np.percentile(vals, 99.9) / full, 0.05, 1.0))
+
+    # -- the hook ----------------------------------------------------------------------------
+    def __call__(self, result, measure, plan):
+        from lts360.recon.triangulation.inverse import plan_pixels
+
+        pts = [v.points_meas_mm[v.valid, :2] for v in result.views.values()]
+        pts = np.concatenate(pts) if pts else np.zeros((0, 2))
+        entry = {"views": {}, "skipped": None}
+        self.log.sections.append(entry)
+        try:
+            profile = section_profile(pts, smooth_deg=1.0)
+        except ValueError as exc:
+            entry["skipped"] = str(exc)
+            return result
+        entry["profile"] = {"center_mm": profile.center_mm.tolist(),
+                            "coverage": profile.coverage,
+                            "largest_gap_deg": profile.largest_gap_deg}
+        t0 = time.perf_counter()
+        image = self.render(profile, plan_pixels(plan), seed=self.seed + len(self.log.sections) - 1,
+                            exposure_fraction=self._exposure_fraction(result))
+        t1 = time.perf_counter()
+        twin = measure(image)
+        self.log.render_s += t1 - t0
+        self.log.measure_s += time.perf_counter() - t1
+        grid = result.grid
+        size = max(1, int(round(np.radians(self.smooth_deg) / grid.theta_step_rad)))
+        wrap = bool(grid.is_full_turn)
+        verts = profile.vertices_mm
+        views = {}
+        for name, v in result.views.items():
+            tv = twin.views.get(name)
+            if tv is None:
+                views[name] = v
+                continue
+            exact = ray_radii(verts, tv.theta_rad, near_mm=tv.r_mm)
+            b = np.where(tv.valid, tv.r_mm - exact, np.nan)
+            b_s, count = _nan_smooth(b, size, wrap)
+            ok = v.valid & np.isfinite(b_s)
+            resid = (b - b_s)[np.isfinite(b) & np.isfinite(b_s)]
+            sd = float(np.std(resid)) if resid.size > 2 else float("nan")
+            u = float(sd / np.sqrt(np.median(count[ok]))) if ok.any() else float("nan")
+            views[name] = dataclasses.replace(v, r_mm=np.where(ok, v.r_mm - b_s, v.r_mm))
+            entry["views"][name] = {
+                "mean_bias_um": float(1e3 * np.mean(b_s[ok])) if ok.any() else 0.0,
+                "bias_range_um": (float(1e3 * np.ptp(b_s[ok])) if ok.any() else 0.0),
+                "n_corrected": int(ok.sum()), "n_uncorrected": int((v.valid & ~ok).sum()),
+                "u_render_um": 1e3 * u if np.isfinite(u) else 0.0}
+        return dataclasses.replace(result, views=views)

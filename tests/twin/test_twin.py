@@ -1,0 +1,206 @@
+"""The digital-twin bias correction: its geometry against closed forms, its rig against the
+calibration it comes from, and a rendered gauge whose bias it removes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from lts360.twin.profile import prism_mesh, ray_radii, section_profile
+
+
+@pytest.fixture(scope="module")
+def paper_rig():
+    from lts360.scenes.rig_io import load_rig
+
+    return load_rig("paper")
+
+
+def _circle(c, r, n=4000, noise=0.0, seed=0):
+    rng = np.random.default_rng(seed)
+    t = rng.uniform(0, 2 * np.pi, n)
+    rr = r + noise * rng.standard_normal(n)
+    return np.column_stack([c[0] + rr * np.cos(t), c[1] + rr * np.sin(t)])
+
+
+@settings(max_examples=30, deadline=None)
+@given(cx=st.floats(-4, 4), cy=st.floats(-4, 4), r=st.floats(5, 20),
+       th=st.floats(0, 2 * np.pi))
+def test_ray_radius_of_a_circle_is_the_closed_form(cx, cy, r, th):
+    """A ray from the origin at θ meets the circle |X − c| = r at t = c·u + √((c·u)² − |c|² + r²);
+    the polygon of 1440 vertices is within its sagitta r(1 − cos(π/1440)) of it."""
+    from lts360.twin.profile import SectionProfile
+
+    phi = (np.arange(1440) + 0.5) * 2 * np.pi / 1440
+    prof = SectionProfile(np.array([cx, cy]), phi, np.full(1440, r), 1.0, 0.0)
+    u = np.array([np.cos(th), np.sin(th)])
+    cu = np.array([cx, cy]) @ u
+    exact = cu + np.sqrt(cu ** 2 - cx ** 2 - cy ** 2 + r ** 2)
+    got = ray_radii(prof.vertices_mm, [th])[0]
+    assert got == pytest.approx(exact, abs=r * (1 - np.cos(np.pi / 1440)) + 1e-9)
+    assert got <= exact + 1e-9  # the chords lie inside the circle
+
+
+def test_ray_radii_pick_the_crossing_nearest_the_hint():
+    """A ray that crosses a non-convex profile twice returns the crossing nearest the hint
+    (the detector's radius), the farthest without one, and NaN when it misses."""
+    outer = np.array([[-2.0, -2.0], [2.0, -2.0], [2.0, 2.0], [-2.0, 2.0]])
+    # a square with a slot x ∈ [1, 1.5] cut down from its top: the ray along +x crosses its
+    # boundary at x = 1, 1.5 and 2
+    c = np.array([[-2, -2], [2, -2], [2, 2], [1.5, 2], [1.5, -0.5], [1, -0.5], [1, 2], [-2, 2]],
+                 float)
+    assert ray_radii(c, [0.0], near_mm=[1.9])[0] == pytest.approx(2.0)
+    assert ray_radii(c, [0.0], near_mm=[1.1])[0] == pytest.approx(1.0)
+    assert ray_radii(c, [0.0], near_mm=[1.4])[0] == pytest.approx(1.5)
+    assert ray_radii(c, [0.0])[0] == pytest.approx(2.0)
+    assert ray_radii(outer + 10.0, [np.pi])[0] != ray_radii(outer + 10.0, [np.pi])[0]  # NaN: missed
+
+
+def test_profile_of_a_noisy_circle_is_the_circle():
+    pts = _circle((1.5, -0.7), 10.0, n=20000, noise=0.02, seed=1)
+    prof = section_profile(pts, smooth_deg=2.0)
+    assert np.allclose(prof.center_mm, (1.5, -0.7), atol=2e-3)
+    assert np.abs(prof.rho_mm - 10.0).max() < 6e-3
+    assert prof.coverage == 1.0 and prof.largest_gap_deg == 0.0
+
+
+def test_profile_bridges_a_gap_and_reports_it():
+    pts = _circle((0, 0), 8.0, n=8000)
+    ang = np.degrees(np.arctan2(pts[:, 1], pts[:, 0])) % 360
+    prof = section_profile(pts[(ang < 100) | (ang > 130)])
+    assert 29 <= prof.largest_gap_deg <= 31
+    assert np.abs(prof.rho_mm - 8.0).max() < 1e-3  # a circle's gap is closed on the circle
+
+
+def test_profile_refuses_too_few_points():
+    with pytest.raises(ValueError, match="need 50"):
+        section_profile(_circle((0, 0), 5.0, n=20))
+
+
+def test_prism_is_watertight_with_the_profile_as_its_section():
+    pts = _circle((0.5, 0.2), 6.0, n=6000)
+    mesh = prism_mesh(section_profile(pts), half_length_mm=10.0)
+    assert mesh.is_watertight and mesh.is_winding_consistent
+    assert mesh.volume > 0  # outward normals
+    area = np.pi * 6.0 ** 2
+    assert mesh.volume == pytest.approx(area * 20.0, rel=1e-4)
+
+
+def test_twin_rig_reproduces_the_calibration(paper_rig):
+    """The twin of a perfect calibration is the true rig: the same camera projection, mirror
+    planes and laser plane (the calibration made from the twin equals the first)."""
+    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.simulator.io import rig_truth
+    from lts360.twin.rig import twin_rig
+
+    cal = calibration_from_frame_truth(rig_truth(paper_rig, paper_rig.camera.K,
+                                                 paper_rig.camera.image_size))
+    twin = twin_rig(cal, paper_rig)
+    cal2 = calibration_from_frame_truth(rig_truth(twin, twin.camera.K, twin.camera.image_size))
+    assert np.allclose(cal2.K, cal.K) and np.allclose(cal2.T_cam_meas, cal.T_cam_meas)
+    for m in cal.mirrors:
+        m2 = cal2.mirror(m.name)
+        assert np.allclose(m2.n, m.n, atol=1e-12) and m2.d_mm == pytest.approx(m.d_mm)
+        assert np.allclose(m2.corners_mm, m.corners_mm, atol=1e-9)
+    assert np.allclose(cal2.laser_plane[0], cal.laser_plane[0])
+    assert cal2.laser_plane[1] == pytest.approx(cal.laser_plane[1])
+    assert twin.camera.f_number == paper_rig.camera.f_number
+
+
+def test_twin_rig_refuses_a_foreign_frame(paper_rig):
+    import dataclasses
+
+    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.simulator.io import rig_truth
+    from lts360.twin.rig import twin_rig
+
+    cal = calibration_from_frame_truth(rig_truth(paper_rig, paper_rig.camera.K,
+                                                 paper_rig.camera.image_size))
+    T = np.array(cal.T_cam_meas)
+    shifted = np.eye(4)
+    shifted[:3, 3] = (100.0, 0.0, 0.0)  # the measurement origin 100 mm off the rig's axis
+    bad = dataclasses.replace(cal, T_cam_meas=T @ shifted, laser_plane=cal.laser_plane)
+    with pytest.raises(ValueError, match="not rig"):
+        twin_rig(bad, paper_rig)
+
+
+@pytest.fixture(scope="module")
+def small_gauge_frame(tmp_path_factory):
+    """A noise-free Ø12 mm gauge 2 mm off the axis at half scale (its views disagree by
+    ~11 µm and its radius reads ~10 µm small as measured)."""
+    import mitsuba as mi
+
+    from lts360.scenes.objects import build_object
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.frame import simulate_frame, write_frame
+
+    if mi.variant() is None:
+        mi.set_variant("llvm_ad_mono")
+    frame = simulate_frame(load_rig("paper"), build_object("plug-gauge:d=12,x=2"), spp=16,
+                           seed=0, noise="none", scale=0.5)
+    return write_frame(tmp_path_factory.mktemp("twin") / "g12", frame)
+
+
+def _gauge_errors(cloud, c=(2.0, 0.0), r_true=6.0):
+    from lts360.geometry.fit import fit_circle
+
+    p = cloud.points_mm[cloud.valid, :2]
+    r = np.hypot(*(p - np.asarray(c)).T)
+    views = cloud.view[cloud.valid]
+    means = [np.mean(r[views == k] - r_true) for k in np.unique(views)]
+    return 1e3 * (fit_circle(p).radius_mm - r_true), 1e3 * np.ptp(means)
+
+
+def test_the_twin_removes_the_line_centre_bias_of_a_rendered_gauge(small_gauge_frame):
+    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.triangulation.measure import Section, measure_sections_following
+    from lts360.scenes.rig_io import load_rig
+    from lts360.twin import TwinCorrector
+
+    cal = load_calibration(small_gauge_frame / "frame.json")
+    sec = [Section(small_gauge_frame / "image.png", 0.0)]
+    plain, _, _ = measure_sections_following(sec, cal, reject=True)
+    twin = TwinCorrector(cal, load_rig("paper"), spp=64)
+    corrected, _, _ = measure_sections_following(sec, cal, reject=True, correct=twin)
+    b0, s0 = _gauge_errors(plain)
+    b1, s1 = _gauge_errors(corrected)
+    assert b0 < -5.0 and s0 > 6.0  # what there is to correct (measured: -9.6 and 11.4 µm)
+    assert abs(b1) < 3.0 and abs(b1) < 0.3 * abs(b0)  # measured: +1.9 µm
+    assert s1 < 0.5 * s0  # measured: 3.7 µm
+    log = twin.log.summary()
+    assert set(log) == {"direct", "left", "right"}
+    assert all(v["n_uncorrected"] == 0 and v["mean_bias_um"] < -3 for v in log.values())
+    # the correction moves the points along their rays and nothing else
+    assert np.array_equal(plain.valid, corrected.valid)
+    assert np.allclose(plain.theta_rad, corrected.theta_rad)
+
+
+def test_measure_with_the_twin_records_it_in_the_cloud(small_gauge_frame, tmp_path, capsys):
+    from lts360.cli import main
+
+    out = tmp_path / "c.ply"
+    assert main(["measure", str(small_gauge_frame), "--calibration",
+                 str(small_gauge_frame / "frame.json"), "--out", str(out),
+                 "--bias-model", "twin", "--twin-spp", "16"]) == 0
+    assert "twin bias correction: direct" in capsys.readouterr().out
+    header = out.read_bytes().split(b"end_header")[0].decode()
+    assert header.count("comment lts360 twin ") == 3
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--method", "classic"], "needs the inverse method"),
+    (["--twin-material", "cheese"], "unknown material"),
+    (["--twin-spp", "0"], "--twin-spp"),
+    (["--twin-rig", "no-such-rig"], "--bias-model twin"),
+])
+def test_twin_usage_errors_are_one_line_exit_2(small_gauge_frame, tmp_path, capsys, extra,
+                                                message):
+    from lts360.cli import main
+
+    rc = main(["measure", str(small_gauge_frame), "--calibration",
+               str(small_gauge_frame / "frame.json"), "--out", str(tmp_path / "c.ply"),
+               "--bias-model", "twin", *extra])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and message in err and "\n" not in err
