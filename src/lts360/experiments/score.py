@@ -168,6 +168,14 @@ def _coverage_deg(theta: np.ndarray, section: np.ndarray, bin_deg: float) -> flo
     return float(np.mean(out))
 
 
+def _object_theta(obj: SceneObject, pts: np.ndarray) -> np.ndarray:
+    """θ of points about the object's own axis (its frame)."""
+    if not len(pts):
+        return np.zeros(0)
+    local = obj.to_object_frame(pts)
+    return np.arctan2(local[:, 1], local[:, 0])
+
+
 def score_cloud(cloud: Cloud, obj: SceneObject, *, theta_bin_deg: float = 0.5,
                 use_mesh: bool = True, rig_truth: dict | None = None) -> dict:
     """Metrics of a cloud against an object's truth (see module docstring).
@@ -195,9 +203,12 @@ def score_cloud(cloud: Cloud, obj: SceneObject, *, theta_bin_deg: float = 0.5,
                  "all_points": error_stats(primary)}
         c, pts = c.select(keep), pts[keep]
         analytic, mesh_err, primary = analytic[keep], mesh_err[keep], primary[keep]
+    # Coverage is of the object's surface: θ about the object's own axis (an object off the
+    # measurement axis is seen over a narrower θ about that axis).
+    theta_obj = _object_theta(obj, pts)
     out = {"object": obj.spec, "n_points": int(len(pts)), "n_theta_samples": int(len(cloud)),
            "truth": "analytic r(θ, z)" if np.isfinite(analytic).any() else "mesh distance",
-           "coverage_deg": _coverage_deg(c.theta_rad, c.section, theta_bin_deg),
+           "coverage_deg": _coverage_deg(theta_obj, c.section, theta_bin_deg),
            "rejected": rejected, **extra}
     out.update(error_stats(primary))
     out["mesh_distance"] = error_stats(mesh_err)
@@ -206,7 +217,7 @@ def score_cloud(cloud: Cloud, obj: SceneObject, *, theta_bin_deg: float = 0.5,
     for code in np.unique(c.view):
         m = c.view == code
         row = error_stats(primary[m])
-        row["coverage_deg"] = _coverage_deg(c.theta_rad[m], c.section[m], theta_bin_deg)
+        row["coverage_deg"] = _coverage_deg(theta_obj[m], c.section[m], theta_bin_deg)
         rows[VIEW_NAMES.get(int(code), str(code))] = row
     out["views"] = rows
     # Round objects: a circle per section (in the object frame) and the radius bias.

@@ -124,12 +124,25 @@ class TwinCorrector:
             raise ValueError(f"twin spp must be an integer >= 1, got {self.spp!r}")
         if not 0 < self.smooth_deg <= 30:
             raise ValueError(f"twin smooth_deg must be in (0, 30], got {self.smooth_deg}")
-        self.rig = twin_rig(self.cal, self.design)
+        self._rigs = {id(self.cal): (self.cal, twin_rig(self.cal, self.design))}
+
+    @property
+    def rig(self) -> Rig:
+        """The twin's rig for ``cal``."""
+        return self._rigs[id(self.cal)][1]
+
+    def rig_for(self, cal: Calibration) -> Rig:
+        """The twin's rig for a plan's calibration (``cal`` itself, or ``cal`` with its origin
+        moved to a section's centre)."""
+        if id(cal) not in self._rigs:
+            self._rigs[id(cal)] = (cal, twin_rig(cal, self.design))
+        return self._rigs[id(cal)][1]
 
     # -- the twin image ----------------------------------------------------------------------
-    def render(self, profile, pixels_xy: np.ndarray, *, seed: int,
-               exposure_fraction: float) -> np.ndarray:
-        """The twin's noise-free digital image (only ``pixels_xy`` rendered)."""
+    def render(self, profile, pixels_xy: np.ndarray, *, seed: int, exposure_fraction: float,
+               rig: Rig | None = None) -> np.ndarray:
+        """The twin's noise-free digital image (only ``pixels_xy`` rendered; ``rig`` defaults
+        to :attr:`rig`)."""
         import mitsuba as mi
 
         from lts360.simulator.frame import sensor_image
@@ -139,12 +152,13 @@ class TwinCorrector:
 
         if mi.variant() is None:
             mi.set_variant(default_variant())
+        rig = self.rig if rig is None else rig
         mesh = prism_mesh(profile, half_length_mm=self.half_length_mm)
-        spec = SceneSpec(self.rig, (("object", mesh,
+        spec = SceneSpec(rig, (("object", mesh,
                                      material_to_bsdf(get_material(self.material))),))
         res = render_radiance_pixels(spec, pixels_xy, spp=int(self.spp), seed=int(seed),
                                      scale=1.0, max_bounces=2, thin_lens=True, laser_on=True)
-        image, _, _ = sensor_image(self.rig, res, noise="none",
+        image, _, _ = sensor_image(rig, res, noise="none",
                                    exposure_fraction=exposure_fraction)
         return image
 
@@ -175,7 +189,8 @@ class TwinCorrector:
                             "largest_gap_deg": profile.largest_gap_deg}
         t0 = time.perf_counter()
         image = self.render(profile, plan_pixels(plan), seed=self.seed + len(self.log.sections) - 1,
-                            exposure_fraction=self._exposure_fraction(result))
+                            exposure_fraction=self._exposure_fraction(result),
+                            rig=self.rig_for(plan.cal))
         t1 = time.perf_counter()
         twin = measure(image)
         self.log.render_s += t1 - t0

@@ -15,6 +15,8 @@ This module never imports the simulator: it reads that file as plain JSON.
 
 from __future__ import annotations
 
+import dataclasses
+
 import json
 import math
 import os
@@ -27,7 +29,7 @@ import numpy as np
 
 from lts360.geometry.mirror import transform_plane
 
-__all__ = ["MirrorPlane", "Calibration", "load_calibration", "save_calibration",
+__all__ = ["MirrorPlane", "Calibration", "load_calibration", "save_calibration", "shift_origin",
            "calibration_from_dict", "calibration_to_dict", "calibration_from_frame_truth",
            "make_T_cam_meas", "FORMAT_NAME", "FORMAT_VERSION"]
 
@@ -361,6 +363,18 @@ def calibration_from_dict(data: Mapping) -> Calibration:
     return Calibration(image_size=(w, h), K=K, dist=dist, mirrors=tuple(mirrors),
                        laser_plane=laser_plane, T_cam_meas=T, view_offsets_mm=offsets,
                        uncertainty=uncertainty)
+
+
+def shift_origin(cal: Calibration, xy_mm) -> Calibration:
+    """The same calibration with the measurement frame's origin moved to ``(x, y, 0)`` of the
+    current frame (axes unchanged: the origin stays in the laser plane).  The §4.4 view offsets
+    are translations and carry over as they are."""
+    x, y = (float(v) for v in np.asarray(xy_mm, dtype=float).reshape(2))
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise ValueError(f"shift_origin: the new origin must be finite, got ({x}, {y})")
+    T = np.array(cal.T_cam_meas)
+    T[:3, 3] = T[:3, :3] @ np.array([x, y, 0.0]) + T[:3, 3]
+    return dataclasses.replace(cal, T_cam_meas=T)
 
 
 def calibration_from_frame_truth(data: Mapping) -> Calibration:

@@ -7,7 +7,9 @@ Nothing here reads the object or its truth.
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -286,7 +288,10 @@ class BandLog:
     found : list of bool
         Per section: whether a profile was found (``False``: no stripe in the coarse pass).
     r_range_mm : list of (float, float)
-        Per section: the radii its fine band spanned.
+        Per section: the radii its fine band spanned (about its grid's centre).
+    centre_mm : list of (float, float)
+        Per section: the centre of its polar grid in the measurement frame ((0, 0): the axis;
+        otherwise the section was re-centred, see :data:`RECENTRE_MAX_INCIDENCE_DEG`).
     coarse_s, plan_s, fine_s : float
         Seconds in coarse passes, in planning fine bands, in fine measurements.
     """
@@ -296,6 +301,7 @@ class BandLog:
     searched: list = field(default_factory=list)
     found: list = field(default_factory=list)
     r_range_mm: list = field(default_factory=list)
+    centre_mm: list = field(default_factory=list)
     coarse_s: float = 0.0
     plan_s: float = 0.0
     fine_s: float = 0.0
@@ -303,8 +309,67 @@ class BandLog:
     def describe(self) -> str:
         lo = min((a for a, _ in self.r_range_mm), default=float("nan"))
         hi = max((b for _, b in self.r_range_mm), default=float("nan"))
+        moved = [c for c in self.centre_mm if c != (0.0, 0.0)]
+        centred = (f"; {len(moved)} section(s) measured about the section's own centre, "
+                   f"up to {max(math.hypot(*c) for c in moved):.2f} mm off the axis"
+                   if moved else "")
         return (f"band found from the image ({self.coarse}; fine band ±{self.half_width_mm:g} mm "
-                f"about the profile, r = {lo:.3f}–{hi:.3f} mm)")
+                f"about the profile, r = {lo:.3f}–{hi:.3f} mm{centred})")
+
+
+#: A section is measured about its own centre (the calibration's origin moved there, the polar
+#: grid with it) when the grid's rays would meet its found profile more obliquely than this
+#: about the axis: a circle of radius R whose centre is e off the axis is met at up to
+#: asin(e / R).  Past ~30° the stripe crosses the rays obliquely and its centre along them is
+#: biased; at e ≥ R the axis leaves the section and rays miss it.
+RECENTRE_MAX_INCIDENCE_DEG = 20.0
+
+
+def recentre_point(profile, *, max_incidence_deg: float = RECENTRE_MAX_INCIDENCE_DEG
+                   ) -> tuple[float, float]:
+    """Where to centre the polar grid for a first-pass ``profile``: ``(0, 0)`` (the axis) when
+    its least-squares circle's centre ``e`` is within ``R · sin(max_incidence)`` of the axis,
+    else that centre (rounded to 10 µm, so that sections alike share a plan)."""
+    from lts360.geometry.fit import fit_circle
+
+    m = np.asarray(profile.measured, bool)
+    if m.sum() < 10:
+        return (0.0, 0.0)
+    th, r = profile.theta_rad[m], profile.r_mm[m]
+    fit = fit_circle(np.column_stack([r * np.cos(th), r * np.sin(th)]))
+    e = float(np.hypot(*fit.center_mm))
+    if not np.isfinite(e) or e <= fit.radius_mm * math.sin(math.radians(max_incidence_deg)):
+        return (0.0, 0.0)
+    cx, cy = (round(float(v), 2) for v in fit.center_mm)
+    return (cx + 0.0, cy + 0.0)
+
+
+@dataclass
+class _Band:
+    grid: CylGrid
+    measure: object
+    n_valid: int
+    plan: InversePlan
+    centre: tuple
+
+
+def _about_axis(cloud: Cloud, res: InverseResult, centre) -> Cloud:
+    """A cloud measured about ``centre`` moved back into the measurement frame: points
+    translated, ``θ`` and ``r`` about the axis again (a row without a point gets the θ of its
+    band's middle)."""
+    c = np.array([centre[0], centre[1]], dtype=float)
+    grid = res.grid
+    k = np.rint((cloud.theta_rad - grid.theta_rad[0]) / grid.theta_step_rad).astype(np.int64)
+    k = np.clip(np.mod(k, grid.n_theta) if grid.is_full_turn else k, 0, grid.n_theta - 1)
+    mid = grid.r_mm[grid.n_r // 2] + grid.r_shift_mm[k]
+    rr = np.where(np.isfinite(cloud.radius_mm), cloud.radius_mm, mid)
+    xy = c + rr[:, None] * np.column_stack([np.cos(cloud.theta_rad), np.sin(cloud.theta_rad)])
+    pts = np.array(cloud.points_mm)
+    ok = np.all(np.isfinite(pts), axis=1)
+    pts[ok, :2] = xy[ok]
+    theta = np.arctan2(xy[:, 1], xy[:, 0])
+    radius = np.where(ok, np.hypot(xy[:, 0], xy[:, 1]), np.nan)
+    return dataclasses.replace(cloud, points_mm=pts, theta_rad=theta, radius_mm=radius)
 
 
 def _band_holds(res: InverseResult, n_valid_then: int) -> bool:
@@ -345,17 +410,29 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
     """
     import time
 
-    from lts360.recon.triangulation.band import DEFAULT_FOLLOW_HALF_WIDTH_MM, BandSearch
+    from lts360.recon.calibration.model import shift_origin
+    from lts360.recon.triangulation.band import (DEFAULT_FOLLOW_HALF_WIDTH_MM, BandSearch,
+                                                 Profile, profile_windows)
 
     w = DEFAULT_FOLLOW_HALF_WIDTH_MM if half_width_mm is None else float(half_width_mm)
     if not w > 0:
         raise ValueError(f"half_width_mm must be > 0, got {half_width_mm}")
-    runner = make_runner(cal, peak=peak, backend=backend, compensate=compensate,
-                         continuity_k=continuity_k, reject=reject)
+    kw = dict(peak=peak, backend=backend, compensate=compensate, continuity_k=continuity_k,
+              reject=reject)
     t0 = time.perf_counter()
     search = BandSearch(cal, make_runner(cal, peak=peak, backend=backend))
     log = BandLog(coarse=search.describe(), half_width_mm=w, plan_s=time.perf_counter() - t0)
-    current = None  # (grid, measure, n_valid when found)
+    searches = {(0.0, 0.0): search}  # one coarse search per polar centre
+
+    def search_at(centre):
+        if centre not in searches:
+            t = time.perf_counter()
+            c_cal = shift_origin(cal, centre)
+            searches[centre] = BandSearch(c_cal, make_runner(c_cal, peak=peak, backend=backend))
+            log.plan_s += time.perf_counter() - t
+        return searches[centre]
+
+    current = None  # _Band: grid, measure, n_valid when found, plan, centre
     clouds = []
     items = list(enumerate(sections))
     for k, s in (progress(items) if progress else items):
@@ -363,45 +440,49 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
         res = None
         if current is not None:
             t = time.perf_counter()
-            res = current[1](img)
+            res = current.measure(img)
             log.fine_s += time.perf_counter() - t
-            if not _band_holds(res, current[2]):
+            if not _band_holds(res, current.n_valid):
                 res = None
         if res is None:
             t = time.perf_counter()
             profile = search.profile(img)
+            centre = (0.0, 0.0)
+            if profile is not None:
+                centre = recentre_point(profile)
+                if centre != (0.0, 0.0):
+                    profile = search_at(centre).profile(img)
+                    if profile is None:  # lost about the centre: keep the axis
+                        centre, profile = (0.0, 0.0), search.profile(img)
             log.coarse_s += time.perf_counter() - t
             log.searched.append(k)
             log.found.append(profile is not None)
-            if profile is None:
-                if current is None:
-                    mid = 0.5 * sum(search.r_range_mm)
-                    from lts360.recon.triangulation.band import Profile
-
-                    th = search.grid.theta_rad
-                    profile = Profile(th, np.full(th.size, mid), np.zeros(th.size, bool), True)
-                else:
-                    profile = None
+            if profile is None and current is None:
+                mid = 0.5 * sum(search.r_range_mm)
+                th = search.grid.theta_rad
+                profile = Profile(th, np.full(th.size, mid), np.zeros(th.size, bool), True)
             if profile is not None:
                 t = time.perf_counter()
-                from lts360.recon.triangulation.band import profile_windows
-
-                grid = search.fine_grid(profile, theta_step_deg=theta_step_deg,
-                                        r_step_mm=r_step_mm, half_width_mm=w)
-                plan = plan_inverse(cal, grid, precompute=False,
-                                    windows=profile_windows(cal, grid, profile))
-                measure = runner(plan)
+                srch = search_at(centre)
+                grid = srch.fine_grid(profile, theta_step_deg=theta_step_deg,
+                                      r_step_mm=r_step_mm, half_width_mm=w)
+                plan = plan_inverse(srch.cal, grid, precompute=False,
+                                    windows=profile_windows(srch.cal, grid, profile))
+                measure = make_runner(srch.cal, **kw)(plan)
                 log.plan_s += time.perf_counter() - t
-                current = (grid, measure, 0, plan)
+                current = _Band(grid, measure, 0, plan, centre)
             t = time.perf_counter()
-            res = current[1](img)
+            res = current.measure(img)
             log.fine_s += time.perf_counter() - t
-            n_valid = sum(int(v.valid.sum()) for v in res.views.values())
-            current = (current[0], current[1], n_valid, current[3])
+            current.n_valid = sum(int(v.valid.sum()) for v in res.views.values())
         else:
             log.found.append(True)
-        log.r_range_mm.append(current[0].r_range_mm)
+        log.r_range_mm.append(current.grid.r_range_mm)
+        log.centre_mm.append(current.centre)
         if correct is not None:
-            res = correct(res, current[1], current[3])
-        clouds.append(result_to_cloud(res, z_mm=s.z_mm, section=k, timing=s.timing, cal=cal))
-    return Cloud.concatenate(clouds), current[0], log
+            res = correct(res, current.measure, current.plan)
+        cloud = result_to_cloud(res, z_mm=s.z_mm, section=k, timing=s.timing,
+                                cal=current.plan.cal)
+        clouds.append(cloud if current.centre == (0.0, 0.0)
+                      else _about_axis(cloud, res, current.centre))
+    return Cloud.concatenate(clouds), current.grid, log
