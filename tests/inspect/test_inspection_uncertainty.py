@@ -56,3 +56,32 @@ def test_scatter_u_of_the_ls_diameter_matches_repeated_sections():
     assert np.mean(us) == pytest.approx(2 * sigma / np.sqrt(3600), rel=0.05)
     # 30 repeats: the sample std is within ±40 % of the true one (chi, 29 dof, > 99 %)
     assert np.std(d, ddof=1) == pytest.approx(np.mean(us), rel=0.4)
+
+
+def test_correlated_mean_u_counts_runs_of_correlated_bins():
+    """AR(1) bin errors (ρ = 0.6): τ = (1 + ρ)/(1 − ρ) = 4, and u(r̄) is the spread of the
+    mean radius over realisations; white bins give τ ≈ 1 and σ/√N; the form (orders ≤ 3) is
+    not counted as noise."""
+    from lts360.inspect.uncertainty import correlated_mean_u
+
+    rng = np.random.default_rng(11)
+    n, rho, sigma = 720, 0.6, 0.005
+    th = np.linspace(-np.pi, np.pi, n, endpoint=False)
+    form = 0.02 * np.cos(2 * th) + 0.01 * np.sin(3 * th)
+    means, us, taus = [], [], []
+    for _ in range(300):
+        e = np.empty(n)
+        e[0] = rng.normal(0, sigma)
+        w = rng.normal(0, sigma * np.sqrt(1 - rho ** 2), n)
+        for k in range(1, n):
+            e[k] = rho * e[k - 1] + w[k]
+        u, tau = correlated_mean_u(th, 10.0 + form + e, 10.0)
+        means.append(e.mean())
+        us.append(u)
+        taus.append(tau)
+    assert np.median(taus) == pytest.approx(4.0, rel=0.2)
+    assert np.median(us) == pytest.approx(np.std(means), rel=0.2)
+    white = rng.normal(0, sigma, n)
+    u, tau = correlated_mean_u(th, 10.0 + form + white, 10.0)
+    assert tau < 1.3 and u == pytest.approx(sigma / np.sqrt(n), rel=0.2)
+    assert np.isnan(correlated_mean_u(th[:10], np.full(10, 10.0), 10.0)[0])

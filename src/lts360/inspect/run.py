@@ -14,7 +14,8 @@ from lts360.inspect.circles import REFERENCES
 from lts360.inspect.nominal import Nominal, ToleranceBand, deviations, place_nominal
 from lts360.inspect.profile import DEFAULT_BIN_DEG, DEFAULT_GAP_DEG, valid_mask
 from lts360.inspect.section import MIN_POINTS, SectionResult, analyse_section
-from lts360.inspect.uncertainty import DEFAULT_DRAWS, calibration_u, combine, scatter_u
+from lts360.inspect.uncertainty import (DEFAULT_DRAWS, calibration_u, combine,
+                                        correlated_mean_u, scatter_u)
 from lts360.recon.triangulation.cloud import VIEW_NAMES, Cloud
 
 __all__ = ["Inspection", "inspect_cloud", "NoValidPoints"]
@@ -176,8 +177,12 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
                     if u_cal is not None else "the calibration carries no covariance: 0")
     rows = []
     for i, s in enumerate(sections):
-        us = scatter_u(s.scatter_mm, s.n_valid, s.points_per_bin)
-        rows.append(_section_dict(s, us, None if u_cal is None else u_cal[i], u_radial_mm))
+        raw = s.extra.get("raw_profile", s.profile)  # unfiltered
+        u_mean, tau = correlated_mean_u(raw.theta_rad, raw.r_mm, s.ls.radius_mm)
+        us = scatter_u(s.scatter_mm, s.n_valid, s.points_per_bin, u_mean_radius_mm=u_mean)
+        row = _section_dict(s, us, None if u_cal is None else u_cal[i], u_radial_mm)
+        row["correlation_bins"] = tau if np.isfinite(tau) else None
+        rows.append(row)
 
     inspection = Inspection(data={}, sections=sections, band=band)
     nom_out = None

@@ -150,4 +150,5 @@ def analyse_section(xy_mm, *, index: int = 0, z_mm: float = 0.0, theta_invalid_r
         gaps=gap_list,
         circles=circles, diameters=diameters(prof, gap_deg=gap_deg),
         harmonics=harm, scatter_mm=sigma,
-        points_per_bin=per_bin, profile=prof, xy_mm=xy, extra={"warnings": warnings})
+        points_per_bin=per_bin, profile=prof, xy_mm=xy,
+        extra={"warnings": warnings, "raw_profile": raw})

@@ -22,6 +22,17 @@ Two components, combined in quadrature (GUM):
 
    (Extremes of noisy bins are biased upwards by about σ/√m; that bias is not corrected.)
 
+   The points are not independent: neighbouring θ share pixels, blur, speckle grains and, on a
+   synthetic frame, render noise, so errors come in runs longer than a bin.  The quantities
+   that average the whole section (centre, LS and mean diameter, harmonic amplitudes) take the
+   larger of the table's value and the same figure from the binned profile with its
+   correlation counted: ``h`` the bins' residuals about the LS circle with the harmonics up to
+   order 3 (the form) removed, ``τ = 1 + 2 Σ ρ_k`` its integrated autocorrelation (summed to
+   the first ρ_k ≤ 0), and ``u(r̄) = s_h √(τ / N)`` over ``N`` bins
+   (:func:`correlated_mean_u`): 2 u(r̄) on the diameters, √2 u(r̄) on the centre and the
+   amplitudes.  On a noise-free gauge (Ø19.9987 mm, 16 spp) τ ≈ 2.2 and the LS diameter's u is
+   0.59 µm, where independent points would give 0.17 µm.
+
 2. **Calibration** (type B, from ``--calibration``'s covariance, see
    :mod:`lts360.recon.calibration.uncertainty`): a Monte Carlo over ``n_draws`` calibrations
    drawn from it.  Every valid point is re-triangulated: projected into its view's image with
@@ -47,7 +58,7 @@ from lts360.inspect.diameters import diameters
 from lts360.inspect.harmonics import fit_harmonics
 from lts360.inspect.profile import bin_profile, uniform_profile
 
-__all__ = ["scatter_u", "retriangulate", "calibration_u", "combine", "MC_SECTIONS",
+__all__ = ["scatter_u", "correlated_mean_u", "retriangulate", "calibration_u", "combine", "MC_SECTIONS",
            "DEFAULT_DRAWS", "CAL_QUANTITIES"]
 
 #: Sections the calibration Monte Carlo runs on.
@@ -59,15 +70,50 @@ CAL_QUANTITIES = ("centre_x_mm", "centre_y_mm", "d_ls_mm", "d_mean_mm", "d_min_m
                   "d_max_mm", "ovality_mm", "ront_lsci_mm", "a2_mm", "a3_mm")
 
 
-def scatter_u(sigma_mm: float, n: int, m: float) -> dict[str, float]:
-    """The scatter component of each quantity (table in the module docstring)."""
+def scatter_u(sigma_mm: float, n: int, m: float, *,
+              u_mean_radius_mm: float = 0.0) -> dict[str, float]:
+    """The scatter component of each quantity (table in the module docstring); with
+    ``u_mean_radius_mm`` (:func:`correlated_mean_u`) the whole-section averages take the larger
+    of the two."""
     s, n, m = float(sigma_mm), max(int(n), 1), max(float(m), 1.0)
+    ur = float(u_mean_radius_mm) if np.isfinite(u_mean_radius_mm) else 0.0
     one = s * np.sqrt(2.0 / m)
-    return {"centre_x_mm": s * np.sqrt(2.0 / n), "centre_y_mm": s * np.sqrt(2.0 / n),
-            "d_ls_mm": 2 * s / np.sqrt(n), "d_mean_mm": 2 * s / np.sqrt(n),
+    centre = max(s * np.sqrt(2.0 / n), np.sqrt(2.0) * ur)
+    size = max(2 * s / np.sqrt(n), 2 * ur)
+    return {"centre_x_mm": centre, "centre_y_mm": centre,
+            "d_ls_mm": size, "d_mean_mm": size,
             "d_min_mm": one, "d_max_mm": one, "calliper_mm": one,
             "ovality_mm": 2 * s / np.sqrt(m), "ront_mm": one, "size_ref_mm": one,
-            "harmonic_mm": s * np.sqrt(2.0 / n), "deviation_mm": s}
+            "harmonic_mm": centre, "deviation_mm": s}
+
+
+def correlated_mean_u(theta_rad, r_mm, radius_mm: float, *, form_orders: int = 3,
+                      max_lag: int = 60) -> tuple[float, float]:
+    """``(u(r̄), τ)``: the standard uncertainty of a binned profile's mean radius with the
+    bins' correlation counted (module docstring).  ``theta_rad``, ``r_mm``: the bins;
+    ``radius_mm``: the LS circle's.  ``(nan, nan)`` for fewer than 4 (2 form_orders + 1)
+    bins."""
+    th = np.asarray(theta_rad, float)
+    res = np.asarray(r_mm, float) - float(radius_mm)
+    n = len(res)
+    k = 2 * form_orders + 1
+    if n < 4 * k:
+        return float("nan"), float("nan")
+    order = np.argsort(th)
+    th, res = th[order], res[order]
+    A = np.column_stack([np.ones(n)] + [f(j * th) for j in range(1, form_orders + 1)
+                                        for f in (np.cos, np.sin)])
+    h = res - A @ np.linalg.lstsq(A, res, rcond=None)[0]
+    var = float(h @ h / (n - k))
+    if var == 0:
+        return 0.0, 1.0
+    tau = 1.0
+    for lag in range(1, min(max_lag, n // 4)):
+        rho = float(np.mean(h[:-lag] * h[lag:])) / float(np.mean(h * h))
+        if rho <= 0:
+            break
+        tau += 2.0 * rho
+    return float(np.sqrt(var * tau / n)), tau
 
 
 def retriangulate(points_xy_mm, view_names, cal_from, cal_to) -> np.ndarray:
