@@ -1,6 +1,6 @@
-"""End to end on rendered frames: render, measure with the true calibration, inspect against
-the analytic nominal with the truth beside, and compare with ``lts360 score`` (slow: two
-renders)."""
+"""End to end on rendered frames: render, measure with the true calibration and the digital
+twin's bias correction, inspect against the analytic nominal with the truth beside, and
+compare with ``lts360 score`` (slow: two renders and their twins)."""
 
 import json
 
@@ -18,13 +18,15 @@ def inspected(tmp_path_factory):
         pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
     root = tmp_path_factory.mktemp("rendered")
     out = {}
-    for spec, radius in (("pvc-pipe", 16.0), ("alu-pipe", 11.0)):
+    for spec, radius, material in (("pvc-pipe", 16.0, "white-pvc"),
+                                   ("alu-pipe", 11.0, "machined-aluminium")):
         d = root / spec
         frame, cal = d / "frame", str(d / "frame" / "frame.json")
         assert main(["render", "--object", spec, "--out", str(frame), "--spp", "8",
                      "--noise", "none"]) == 0
         assert main(["measure", str(frame), "--calibration", cal, "--out", str(d / "cloud.ply"),
-                     "--radius-mm", str(radius)]) == 0
+                     "--radius-mm", str(radius), "--bias-model", "twin",
+                     "--twin-material", material]) == 0
         assert main(["score", str(d / "cloud.ply"), "--truth", str(frame), "--out",
                      str(d / "metrics.json")]) == 0
         assert main(["inspect", str(d / "cloud.ply"), "--out", str(d / "report"), "--nominal",
@@ -38,25 +40,35 @@ def inspected(tmp_path_factory):
 def test_the_diameter_error_is_twice_the_scored_radial_bias(inspected):
     for spec, (s, m) in inspected.items():
         err = s["d_ls_mm"]["value"] - s["truth"]["d_ls_mm"]
-        # measured: PVC −5.8 µm, alu −29.7 µm (score: −14.3 µm radial; the shiny pipe);
         # the LS fit weighs the directions evenly, the score's mean every point: 3 µm apart
         assert err == pytest.approx(2 * m["mean_mm"], abs=0.003), spec
-        # noise-free with the true calibration: U(k=2) is the repeatability (< 1 µm), not
-        # the accuracy; docs/inspection.md (--u-radial-mm)
-        assert s["d_ls_mm"]["U_k2"] < 0.001
+    # twin-corrected, the PVC pipe's diameter is right within its own U (16 spp: −0.75 µm,
+    # U 3.5 µm); the shiny alu pipe's is not (−21.5 µm: its axial waviness on a specular
+    # surface, which the straight twin of one section does not model; docs/inspection.md)
+    pvc = inspected["pvc-pipe"][0]
+    assert abs(pvc["d_ls_mm"]["value"] - pvc["truth"]["d_ls_mm"]) <= pvc["d_ls_mm"]["U_k2"]
+    alu = inspected["alu-pipe"][0]
+    assert -0.035 < alu["d_ls_mm"]["value"] - alu["truth"]["d_ls_mm"] < -0.008
 
 
 def test_pvc_ovality_and_alu_lobes(inspected):
     pvc, alu = inspected["pvc-pipe"][0], inspected["alu-pipe"][0]
-    # measured +40 µm: the dent's flank, seen by the direct view only (20 µm rms there)
-    assert pvc["ovality_mm"]["value"] == pytest.approx(pvc["truth"]["ovality_mm"], abs=0.05)
+    # each within its own U(k=2) (16 spp: ovality +13.5 µm, U 36 µm; A3 +0.1 µm, U 1.5 µm)
+    e_ov = pvc["ovality_mm"]["value"] - pvc["truth"]["ovality_mm"]
+    assert abs(e_ov) <= pvc["ovality_mm"]["U_k2"] and abs(e_ov) < 0.05
     assert alu["harmonics"]["dominant_order"] == 3
-    # measured 30.7 µm against 30.0 µm
-    assert alu["harmonics"]["a3_mm"]["value"] == pytest.approx(alu["truth"]["a3_mm"], abs=0.002)
+    e_a3 = alu["harmonics"]["a3_mm"]["value"] - alu["truth"]["a3_mm"]
+    assert abs(e_a3) <= alu["harmonics"]["a3_mm"]["U_k2"] and abs(e_a3) < 0.002
 
 
 def test_the_deviation_from_the_nominal_agrees_with_the_score(inspected):
     for spec, (s, m) in inspected.items():
         # normal distance after centring vs radial error about the true axis
         assert s["nominal"]["deviation_rms_mm"] == pytest.approx(m["rms_mm"], rel=0.25), spec
-        assert s["nominal"]["conformance_iso14253"] in ("conforms", "inconclusive")
+    # the PVC pipe's deviations lie well inside ±0.1 mm; the shiny alu pipe's extremes (−40 µm
+    # lobes of error where its specular lobe glints, ±120 µm single points at 8 spp) reach
+    # the band's edge, and a few of its 4400 points fall outside
+    assert inspected["pvc-pipe"][0]["nominal"]["conformance_iso14253"] in ("conforms",
+                                                                         "inconclusive")
+    alu = inspected["alu-pipe"][0]
+    assert alu["nominal"]["n_outside"] < 0.005 * alu["n_valid"]

@@ -178,8 +178,10 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
     rows = []
     for i, s in enumerate(sections):
         raw = s.extra.get("raw_profile", s.profile)  # unfiltered
-        u_mean, tau = correlated_mean_u(raw.theta_rad, raw.r_mm, s.ls.radius_mm)
-        us = scatter_u(s.scatter_mm, s.n_valid, s.points_per_bin, u_mean_radius_mm=u_mean)
+        u_mean, tau, s_bin = correlated_mean_u(raw.theta_rad, raw.r_mm, s.ls.radius_mm,
+                                               bin_deg=bin_deg)
+        us = scatter_u(s.scatter_mm, s.n_valid, s.points_per_bin, u_mean_radius_mm=u_mean,
+                       u_bin_mm=s_bin)
         row = _section_dict(s, us, None if u_cal is None else u_cal[i], u_radial_mm)
         row["correlation_bins"] = tau if np.isfinite(tau) else None
         rows.append(row)

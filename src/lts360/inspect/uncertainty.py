@@ -23,15 +23,17 @@ Two components, combined in quadrature (GUM):
    (Extremes of noisy bins are biased upwards by about σ/√m; that bias is not corrected.)
 
    The points are not independent: neighbouring θ share pixels, blur, speckle grains and, on a
-   synthetic frame, render noise, so errors come in runs longer than a bin.  The quantities
-   that average the whole section (centre, LS and mean diameter, harmonic amplitudes) take the
-   larger of the table's value and the same figure from the binned profile with its
-   correlation counted: ``h`` the bins' residuals about the LS circle with the harmonics up to
-   order 3 (the form) removed, ``τ = 1 + 2 Σ ρ_k`` its integrated autocorrelation (summed to
-   the first ρ_k ≤ 0), and ``u(r̄) = s_h √(τ / N)`` over ``N`` bins
-   (:func:`correlated_mean_u`): 2 u(r̄) on the diameters, √2 u(r̄) on the centre and the
-   amplitudes.  On a noise-free gauge (Ø19.9987 mm, 16 spp) τ ≈ 2.2 and the LS diameter's u is
-   0.59 µm, where independent points would give 0.17 µm.
+   synthetic frame, render noise, so errors come in runs longer than a bin.  From the binned
+   profile: ``h`` the bins' residuals about the LS circle less their circular moving average
+   over :data:`FORM_WINDOW_DEG` (the form, which is not noise); the bins' noise modelled as
+   AR(1), its variance ``s_h²`` and lag-1 correlation ρ those that give ``h``'s after the same
+   moving average (exact, by the spectrum), ``τ = (1 + ρ)/(1 − ρ)`` and ``u(r̄) = s_h √(τ / N)``
+   over ``N`` bins (:func:`correlated_mean_u`).  The whole-section averages take the larger of the table's
+   value and 2 u(r̄) (diameters) or √2 u(r̄) (centre, amplitudes); the quantities read at
+   single bins (two-point diameters, callipers, ovality, RONt) use ``max(σ/√m, s_h)`` for one
+   bin's error.  Form shorter than the window (a dent's flank) counts as noise: conservative.
+   On the noise-free gauge (Ø19.9987 mm, 16 spp, twin-corrected) τ = 2.1 and u(D_LS) =
+   0.57 µm, where independent points give 0.17 µm.
 
 2. **Calibration** (type B, from ``--calibration``'s covariance, see
    :mod:`lts360.recon.calibration.uncertainty`): a Monte Carlo over ``n_draws`` calibrations
@@ -70,50 +72,76 @@ CAL_QUANTITIES = ("centre_x_mm", "centre_y_mm", "d_ls_mm", "d_mean_mm", "d_min_m
                   "d_max_mm", "ovality_mm", "ront_lsci_mm", "a2_mm", "a3_mm")
 
 
-def scatter_u(sigma_mm: float, n: int, m: float, *,
-              u_mean_radius_mm: float = 0.0) -> dict[str, float]:
+#: Window of the moving average taken as the form when the bins' correlation is estimated.
+FORM_WINDOW_DEG = 10.0
+
+
+def scatter_u(sigma_mm: float, n: int, m: float, *, u_mean_radius_mm: float = 0.0,
+              u_bin_mm: float = 0.0) -> dict[str, float]:
     """The scatter component of each quantity (table in the module docstring); with
-    ``u_mean_radius_mm`` (:func:`correlated_mean_u`) the whole-section averages take the larger
-    of the two."""
+    ``u_mean_radius_mm`` and ``u_bin_mm`` (:func:`correlated_mean_u`) each quantity takes the
+    larger of the independent-point and the correlated figure."""
     s, n, m = float(sigma_mm), max(int(n), 1), max(float(m), 1.0)
     ur = float(u_mean_radius_mm) if np.isfinite(u_mean_radius_mm) else 0.0
-    one = s * np.sqrt(2.0 / m)
+    ub = float(u_bin_mm) if np.isfinite(u_bin_mm) else 0.0
+    bin_u = max(s / np.sqrt(m), ub)  # one bin's error
+    one = np.sqrt(2.0) * bin_u
     centre = max(s * np.sqrt(2.0 / n), np.sqrt(2.0) * ur)
     size = max(2 * s / np.sqrt(n), 2 * ur)
     return {"centre_x_mm": centre, "centre_y_mm": centre,
             "d_ls_mm": size, "d_mean_mm": size,
             "d_min_mm": one, "d_max_mm": one, "calliper_mm": one,
-            "ovality_mm": 2 * s / np.sqrt(m), "ront_mm": one, "size_ref_mm": one,
+            "ovality_mm": 2 * bin_u, "ront_mm": one, "size_ref_mm": one,
             "harmonic_mm": centre, "deviation_mm": s}
 
 
-def correlated_mean_u(theta_rad, r_mm, radius_mm: float, *, form_orders: int = 3,
-                      max_lag: int = 60) -> tuple[float, float]:
-    """``(u(r̄), τ)``: the standard uncertainty of a binned profile's mean radius with the
-    bins' correlation counted (module docstring).  ``theta_rad``, ``r_mm``: the bins;
-    ``radius_mm``: the LS circle's.  ``(nan, nan)`` for fewer than 4 (2 form_orders + 1)
-    bins."""
+def _ar1_after_highpass(n: int, w: int, rhos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For AR(1) noise of unit variance and lag-1 correlation ``rhos``, after subtracting its
+    circular ``w``-bin moving average: the variance left and the lag-1 correlation (exact on
+    ``n`` circular bins, by the spectrum)."""
+    f = np.fft.rfftfreq(n)
+    z = np.exp(-2j * np.pi * f)
+    spec = (1 - rhos[:, None] ** 2) / np.abs(1 - rhos[:, None] * z[None, :]) ** 2
+    k = np.arange(w) - (w - 1) / 2.0
+    ma = np.exp(-2j * np.pi * np.outer(f, k)).mean(axis=1)  # the moving average's response
+    s = spec * np.abs(1 - ma[None, :]) ** 2
+    wts = np.where((np.arange(f.size) == 0) | ((n % 2 == 0) & (np.arange(f.size) == f.size - 1)),
+                   1.0, 2.0)
+    var = (s * wts).sum(axis=1) / n
+    lag1 = (s * wts * np.cos(2 * np.pi * f)).sum(axis=1) / n
+    return var, lag1 / var
+
+
+def correlated_mean_u(theta_rad, r_mm, radius_mm: float, *, bin_deg: float = 0.5,
+                      form_window_deg: float = FORM_WINDOW_DEG) -> tuple[float, float, float]:
+    """``(u(r̄), τ, s)`` of a binned profile (module docstring): ``theta_rad``, ``r_mm`` its
+    bins, ``radius_mm`` the LS circle's; ``s`` one bin's noise.  NaNs for fewer than four
+    windows of bins.
+
+    The bins' noise is modelled as AR(1): its lag-1 correlation ρ and variance are those that,
+    after the form's moving average is subtracted, give the residuals' lag-1 correlation and
+    variance; τ = (1 + ρ)/(1 − ρ)."""
+    from scipy.ndimage import uniform_filter1d
+
     th = np.asarray(theta_rad, float)
     res = np.asarray(r_mm, float) - float(radius_mm)
     n = len(res)
-    k = 2 * form_orders + 1
-    if n < 4 * k:
-        return float("nan"), float("nan")
-    order = np.argsort(th)
-    th, res = th[order], res[order]
-    A = np.column_stack([np.ones(n)] + [f(j * th) for j in range(1, form_orders + 1)
-                                        for f in (np.cos, np.sin)])
-    h = res - A @ np.linalg.lstsq(A, res, rcond=None)[0]
-    var = float(h @ h / (n - k))
-    if var == 0:
-        return 0.0, 1.0
-    tau = 1.0
-    for lag in range(1, min(max_lag, n // 4)):
-        rho = float(np.mean(h[:-lag] * h[lag:])) / float(np.mean(h * h))
-        if rho <= 0:
-            break
-        tau += 2.0 * rho
-    return float(np.sqrt(var * tau / n)), tau
+    w = max(3, int(round(form_window_deg / bin_deg)))
+    if n < 4 * w:
+        return float("nan"), float("nan"), float("nan")
+    res = res[np.argsort(th)]
+    h = res - uniform_filter1d(res, w, mode="wrap")
+    var_h = float(np.mean(h * h))
+    if var_h == 0:
+        return 0.0, 1.0, 0.0
+    r1 = float(np.mean(h * np.roll(h, 1))) / var_h
+    rhos = np.linspace(0.0, 0.95, 96)
+    kept, lag1 = _ar1_after_highpass(n, w, rhos)
+    rho = float(np.interp(r1, lag1, rhos)) if r1 > lag1[0] else 0.0
+    kept_at = float(np.interp(rho, rhos, kept))
+    sigma2 = var_h / kept_at
+    tau = (1 + rho) / (1 - rho)
+    return float(np.sqrt(sigma2 * tau / n)), tau, float(np.sqrt(sigma2))
 
 
 def retriangulate(points_xy_mm, view_names, cal_from, cal_to) -> np.ndarray:
