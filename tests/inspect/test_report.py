@@ -108,3 +108,26 @@ def test_a_section_seen_over_an_arc_only_is_reported_with_a_warning():
 def test_the_json_is_strict(report_dir):
     text = (report_dir / "inspection.json").read_text()
     json.loads(text, parse_constant=lambda c: pytest.fail(f"{c} in inspection.json"))
+
+
+def test_a_moving_scan_reports_when_each_section_and_event_passed(tmp_path):
+    """A cloud with row times (a moving object): each section's median time and spread in the
+    JSON and the CSV, and every lump or neck-down with the time it passed the laser."""
+    import dataclasses
+
+    from lts360.inspect.report import csv_rows
+
+    cloud = scan_cloud(n_sections=12, dent_mm=0.3, dent_z_mm=0.7, dent_sigma_z_mm=0.8)
+    speed = 200.0  # mm/s: z = −speed · t
+    t = -cloud.points_mm[:, 2] / speed + 1e-4 * (cloud.view.astype(float) - 1)  # views apart
+    moving = dataclasses.replace(cloud, time_s=t)
+    data = inspect_cloud(moving).data
+    s0 = data["sections"][0]
+    assert s0["time_s"] == pytest.approx(-s0["z_mm"] / speed, abs=1.1e-4)
+    assert s0["time_span_s"] == pytest.approx(2e-4, rel=1e-6)
+    assert data["scan"]["events"], "the dent should be found"
+    for e in data["scan"]["events"]:
+        assert e["time_s"] == pytest.approx(-e["z_extreme_mm"] / speed, abs=1.1e-4)
+    assert "time_s" in csv_rows(data)[0]
+    still = inspect_cloud(cloud).data
+    assert "time_s" not in still["sections"][0] and "time_range_s" not in still["scan"]

@@ -48,6 +48,8 @@ def csv_rows(data: dict) -> list[dict]:
     for s in data["sections"]:
         row = {"index": s["index"], "z_mm": s["z_mm"], "n_valid": s["n_valid"],
                "coverage_deg": round(s["coverage_deg"], 3), "scatter_mm": s["scatter_mm"]}
+        if "time_s" in s:  # a moving object
+            row["time_s"], row["time_span_s"] = s["time_s"], s["time_span_s"]
         for key in ("centre_x_mm", "centre_y_mm", "d_ls_mm", "d_mean_mm", "d_min_mm",
                     "d_max_mm", "ovality_mm", "ovality_over_sum_pct", "ovality_over_mean_pct",
                     "calliper_min_mm", "calliper_max_mm"):

@@ -150,7 +150,7 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
     if not ok.any():
         raise NoValidPoints(f"the cloud {source or ''} has no valid point ({len(cloud)} samples, "
                             "none finite with quality FOUND or SATURATED)".replace("  ", " "))
-    sections, skipped, xy_list, view_list = [], [], [], []
+    sections, skipped, xy_list, view_list, times = [], [], [], [], []
     for k in np.unique(cloud.section):
         m = cloud.section == k
         v = m & ok
@@ -166,6 +166,7 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
             bin_deg=bin_deg, gap_deg=gap_deg, filter_upr=filter_upr))
         xy_list.append(cloud.points_mm[v, :2])
         view_list.append(_VIEW_LOOKUP[cloud.view[v]])
+        times.append(_section_time(cloud, v))
     if not sections:
         raise NoValidPoints(f"no section has {MIN_POINTS} valid points: "
                             + ", ".join(f"section {s['index']}: {s['n_valid']}" for s in skipped))
@@ -184,6 +185,8 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
                        u_bin_mm=s_bin)
         row = _section_dict(s, us, None if u_cal is None else u_cal[i], u_radial_mm)
         row["correlation_bins"] = tau if np.isfinite(tau) else None
+        if times[i] is not None:
+            row["time_s"], row["time_span_s"] = times[i]
         rows.append(row)
 
     inspection = Inspection(data={}, sections=sections, band=band)
@@ -233,6 +236,19 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
     return inspection
 
 
+def _section_time(cloud: Cloud, valid: np.ndarray) -> tuple[float, float] | None:
+    """A moving object's section: the median exposure time of its valid points' rows and
+    their spread (a rolling shutter exposes its views at different times); ``None`` for a
+    still cloud."""
+    if cloud.time_s is None:
+        return None
+    t = np.asarray(cloud.time_s)[valid]
+    t = t[np.isfinite(t)]
+    if t.size == 0:
+        return None
+    return float(np.median(t)), float(np.ptp(t))
+
+
 def _scan(sections: list[SectionResult], rows: list[dict], lump_mm: float) -> dict:
     z = np.array([s.z_mm for s in sections])
     val = lambda key: np.array([r[key]["value"] if r[key]["value"] is not None else np.nan  # noqa: E731
@@ -245,6 +261,12 @@ def _scan(sections: list[SectionResult], rows: list[dict], lump_mm: float) -> di
            "events": [e.__dict__ for e in scan_mod.lumps_and_necks(
                z, val("d_min_mm"), val("d_max_mm"), threshold_mm=lump_mm,
                indices=[s.index for s in sections])]}
+    if all("time_s" in r for r in rows):  # a moving object: when each event passed the laser
+        t = np.array([r["time_s"] for r in rows])
+        order = np.argsort(z)
+        out["time_range_s"] = [float(t.min()), float(t.max())]
+        for e in out["events"]:
+            e["time_s"] = float(np.interp(e["z_extreme_mm"], z[order], t[order]))
     if len(sections) >= 2 and np.ptp(z) > 0:
         ax = scan_mod.fit_axis(z, [s.ls.centre_mm for s in sections])
         out["axis"] = {"x0_mm": ax.x0_mm, "y0_mm": ax.y0_mm, "slope_x": ax.slope_x,
