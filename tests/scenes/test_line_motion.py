@@ -35,6 +35,42 @@ def test_feed_vibration_and_rotation_in_closed_form():
         2000.0 + w * math.hypot(0.05, 0.02) + 2 * math.pi * 10.0)
 
 
+def test_a_random_vibration_has_its_rms_and_correlation_and_is_seeded():
+    """Over many seeds, x(t) has variance A² and corr(x(t), x(t + τ)) is the truncated
+    Lorentzian's ∫ cos(2π f τ) L(f) df / ∫ L(f) df (≈ exp(−2π f_c τ)); one seed gives one path
+    at any times; its speed stays within max_point_speed_mm_s."""
+    from scipy.integrate import quad
+
+    from lts360.scenes.motion import RANDOM_VIBRATION_CUTOFF
+
+    fc, A, tau = 40.0, 0.08, 0.002
+    paths = np.array([Motion(vibration_amplitude_mm=(A, A), vibration_frequency_hz=fc,
+                             vibration_kind="random", vibration_seed=k).offset_mm([0.3, 0.3 + tau])
+                      for k in range(1500)])  # (seeds, 2 times, 3)
+    x0, x1 = paths[:, 0, :2].ravel(), paths[:, 1, :2].ravel()
+    assert np.sqrt(np.mean(x0 ** 2)) == pytest.approx(A, rel=0.05)
+    lor = lambda f: 1.0 / (1.0 + (f / fc) ** 2)  # noqa: E731
+    top = RANDOM_VIBRATION_CUTOFF * fc
+    expected = quad(lambda f: math.cos(2 * math.pi * f * tau) * lor(f), 0, top, limit=200)[0] \
+        / quad(lor, 0, top)[0]
+    assert np.mean(x0 * x1) / A ** 2 == pytest.approx(expected, abs=0.05)
+    assert abs(expected - math.exp(-2 * math.pi * fc * tau)) < 0.1  # near the OU's
+    m = Motion(vibration_amplitude_mm=(A, 0.02), vibration_frequency_hz=fc,
+               vibration_kind="random", vibration_seed=7)
+    t = np.linspace(0, 0.05, 2001)
+    np.testing.assert_array_equal(m.offset_mm(t)[100], m.offset_mm([t[100]])[0])
+    v = np.diff(m.offset_mm(t)[:, :2], axis=0) / np.diff(t)[:, None]
+    assert np.hypot(*v.T).max() <= m.max_point_speed_mm_s(0.0)
+    assert not m.still
+    other = Motion(vibration_amplitude_mm=(A, 0.02), vibration_frequency_hz=fc,
+                   vibration_kind="random", vibration_seed=8)
+    assert not np.allclose(other.offset_mm(t), m.offset_mm(t))
+    with pytest.raises(ValueError, match="vibration_kind"):
+        Motion(vibration_kind="square")
+    with pytest.raises(ValueError, match="vibration_seed"):
+        Motion(vibration_kind="random", vibration_seed=-1)
+
+
 def test_rolling_rows_start_one_line_time_apart():
     np.testing.assert_allclose(Shutter("rolling", 1e-5).row_start_s([0, 1, 100]), [0, 1e-5, 1e-3])
     np.testing.assert_array_equal(Shutter().row_start_s([0, 5]), [0.0, 0.0])

@@ -153,7 +153,9 @@ def _acquisition(args):
         return Acquisition(args.exposure_us * 1e-6,
                            shutter=Shutter(args.shutter, args.line_time_us * 1e-6),
                            motion=Motion(args.speed_mm_s, amp, args.vibration_hz,
-                                         rotation_rate_deg_s=args.rotation_deg_s),
+                                         rotation_rate_deg_s=args.rotation_deg_s,
+                                         vibration_kind=args.vibration_kind,
+                                         vibration_seed=args.vibration_seed),
                            trigger=trigger)
     except ValueError as exc:
         raise UsageError(f"motion: {exc}")

@@ -82,7 +82,12 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--speed-mm-s", type=float, default=0.0, help="feed along the axis, mm/s")
     m.add_argument("--vibration-mm", default=None, metavar="AX,AY",
                    help="lateral vibration amplitudes in x and y, mm")
-    m.add_argument("--vibration-hz", type=float, default=0.0, help="vibration frequency")
+    m.add_argument("--vibration-hz", type=float, default=0.0,
+                   help="vibration frequency (a random vibration: its corner frequency)")
+    m.add_argument("--vibration-kind", choices=("sine", "random"), default="sine",
+                   help="sine (peak amplitude) or a seeded random walk (rms amplitude; a "
+                        "band-limited Ornstein-Uhlenbeck process)")
+    m.add_argument("--vibration-seed", type=int, default=0, help="the random vibration's path")
     m.add_argument("--rotation-deg-s", type=float, default=0.0, help="rotation about the axis")
     m.add_argument("--shutter", choices=("global", "rolling"), default="global")
     m.add_argument("--line-time-us", type=float, default=0.0,

@@ -4,7 +4,12 @@ The rig (camera, laser, mirrors) stays fixed; the object moves.  Its pose at tim
 from the trigger of the frame) is the stage transform of today's still frames composed with
 
 * a feed along the axis: ``z(t) = z₀ + v t`` (``speed_mm_s``);
-* a lateral vibration: ``x(t) = A_x sin(2π f t + φ_x)``, ``y(t) = A_y sin(2π f t + φ_y)``;
+* a lateral vibration: ``x(t) = A_x sin(2π f t + φ_x)``, ``y(t) = A_y sin(2π f t + φ_y)``
+  (``vibration_kind="sine"``), or a seeded random one (``"random"``): in each axis a stationary
+  Gaussian process of rms ``A`` whose spectrum is a Lorentzian of corner ``f`` cut at ``10 f``
+  (a band-limited Ornstein–Uhlenbeck walk: correlation ≈ exp(−2π f |τ|)), synthesised as
+  :data:`RANDOM_VIBRATION_TERMS` cosines with frequencies drawn from that spectrum and random
+  phases, so that the same seed gives the same path at any time;
 * an optional rotation about the axis at ``rotation_rate_deg_s``,
 
 ``T(t) = Translate(x(t), y(t), z(t)) · Rot_z(ω t)`` applied after the object's own placement.
@@ -23,7 +28,13 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-__all__ = ["Motion", "Shutter", "Trigger", "Acquisition"]
+__all__ = ["Motion", "Shutter", "Trigger", "Acquisition", "RANDOM_VIBRATION_TERMS",
+           "RANDOM_VIBRATION_CUTOFF"]
+
+#: Cosines summed for a random vibration (its values are Gaussian to within ~1/√N).
+RANDOM_VIBRATION_TERMS = 64
+#: The random vibration's spectrum is cut at this multiple of its corner frequency.
+RANDOM_VIBRATION_CUTOFF = 10.0
 
 
 def _finite(name: str, value: float) -> float:
@@ -42,12 +53,16 @@ class Motion:
     speed_mm_s : float
         Feed along +z (the object's axis), mm/s; may be negative.
     vibration_amplitude_mm : (2,) float, >= 0
-        Lateral amplitude in x and y, mm.
+        Lateral amplitude in x and y, mm: the peak of a sine, the rms of a random vibration.
     vibration_frequency_hz : float, >= 0
+        The sine's frequency, or the random vibration's corner frequency.
     vibration_phase_deg : (2,) float
-        Phases φ_x, φ_y at t = 0.
+        Phases φ_x, φ_y at t = 0 (sine).
     rotation_rate_deg_s : float
         About the axis (+z), degrees per second.
+    vibration_kind : {"sine", "random"}
+    vibration_seed : int
+        The random vibration's path.
     """
 
     speed_mm_s: float = 0.0
@@ -55,8 +70,17 @@ class Motion:
     vibration_frequency_hz: float = 0.0
     vibration_phase_deg: tuple[float, float] = (0.0, 90.0)
     rotation_rate_deg_s: float = 0.0
+    vibration_kind: str = "sine"
+    vibration_seed: int = 0
 
     def __post_init__(self):
+        if self.vibration_kind not in ("sine", "random"):
+            raise ValueError(f"vibration_kind must be 'sine' or 'random', got "
+                             f"{self.vibration_kind!r}")
+        if isinstance(self.vibration_seed, bool) or int(self.vibration_seed) != self.vibration_seed \
+                or self.vibration_seed < 0:
+            raise ValueError(f"vibration_seed must be an integer >= 0, got {self.vibration_seed!r}")
+        object.__setattr__(self, "vibration_seed", int(self.vibration_seed))
         _finite("speed_mm_s", self.speed_mm_s)
         _finite("rotation_rate_deg_s", self.rotation_rate_deg_s)
         amp = tuple(_finite("vibration_amplitude_mm", a) for a in self.vibration_amplitude_mm)
@@ -82,11 +106,24 @@ class Motion:
         """(n, 3) translation of the object at times ``t_s`` (s), from its pose at t = 0
         minus the vibration's value at t = 0 is *not* removed: x(0) = A_x sin φ_x."""
         t = np.atleast_1d(np.asarray(t_s, float))
-        w = 2.0 * math.pi * self.vibration_frequency_hz
         ax, ay = self.vibration_amplitude_mm
+        if self.vibration_kind == "random":
+            f, phase = self._random_terms()
+            arg = 2.0 * math.pi * f[:, None, :] * t[None, :, None] + phase[:, None, :]
+            xy = np.sqrt(2.0 / f.shape[1]) * np.cos(arg).sum(axis=2)  # (2, n), unit rms
+            return np.column_stack([ax * xy[0], ay * xy[1], self.speed_mm_s * t])
+        w = 2.0 * math.pi * self.vibration_frequency_hz
         px, py = np.radians(self.vibration_phase_deg)
         return np.column_stack([ax * np.sin(w * t + px), ay * np.sin(w * t + py),
                                 self.speed_mm_s * t])
+
+    def _random_terms(self) -> tuple[np.ndarray, np.ndarray]:
+        """(2, N) frequencies (Hz) drawn from the Lorentzian of corner f cut at
+        ``RANDOM_VIBRATION_CUTOFF · f``, and (2, N) phases, from ``vibration_seed``."""
+        rng = np.random.default_rng([self.vibration_seed, 0x7A1B])
+        u = rng.uniform(0.0, 1.0, (2, RANDOM_VIBRATION_TERMS))
+        f = self.vibration_frequency_hz * np.tan(u * math.atan(RANDOM_VIBRATION_CUTOFF))
+        return f, rng.uniform(0.0, 2.0 * math.pi, (2, RANDOM_VIBRATION_TERMS))
 
     def transform(self, t_s: float) -> np.ndarray:
         """4 × 4 ``T(t)`` (module docstring), applied after the object's still placement."""
@@ -99,8 +136,13 @@ class Motion:
 
     def max_point_speed_mm_s(self, radius_mm: float) -> float:
         """Upper bound of the speed of any object point within ``radius_mm`` of the axis."""
-        w = 2.0 * math.pi * self.vibration_frequency_hz
-        lateral = w * math.hypot(*self.vibration_amplitude_mm)
+        if self.vibration_kind == "random":  # the bound of this path: Σ 2π f_k |term|
+            f, _ = self._random_terms()
+            amp = np.asarray(self.vibration_amplitude_mm) * np.sqrt(2.0 / f.shape[1])
+            lateral = float(np.hypot(*(amp * 2.0 * math.pi * f.sum(axis=1))))
+        else:
+            w = 2.0 * math.pi * self.vibration_frequency_hz
+            lateral = w * math.hypot(*self.vibration_amplitude_mm)
         return (abs(self.speed_mm_s) + lateral
                 + abs(math.radians(self.rotation_rate_deg_s)) * float(radius_mm))
 
