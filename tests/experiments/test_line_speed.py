@@ -68,6 +68,12 @@ def test_line_speed_study_end_to_end(tmp_path):
     # as one instant they are far off, row-aware they are not.
     r = rows[("rolling", 500.0)]
     assert r["rms_instant_mm"] > r["rms_rows_mm"] + 0.05
+    # The frozen frame (same sub-frames, object held still) has the still frame's error level,
+    # so the rolling shutter's excess is the motion's: the largest speed within 20 µm is 0.
+    assert r["rms_frozen_mm"] < 0.5 * r["rms_instant_mm"]
+    assert rows[("global", 0.0)]["rms_frozen_mm"] == rows[("global", 0.0)]["rms_instant_mm"]
+    limits = {L["shutter"]: L["largest_speed_mm_s"] for L in table["largest_speed"]}
+    assert limits["rolling"] == 0.0
     for name in ("table.json", "table.txt", "line-speed.png", "trials/results.nc"):
         assert (tmp_path / name).is_file()
     assert json.loads((tmp_path / "table.json").read_text())["lumps"]["p_missed"]

@@ -309,7 +309,8 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--profile-rate-hz", type=float, default=200.0,
                    help="section rate for the lumps-missed table")
     q.add_argument("--accuracy-um", type=float, default=20.0,
-                   help="what the motion may add to the still frame's robust RMS error")
+                   help="what the motion may add (in quadrature) to the robust RMS error of "
+                        "the same sub-frames with the object held still")
     q.add_argument("--noise", choices=("none", "realistic"), default="none")
     q.add_argument("--spp", type=int, default=16)
     q.add_argument("--scale", type=float, default=0.5, help="image scale (default 0.5)")
