@@ -43,7 +43,7 @@ def test_the_diameter_error_is_twice_the_scored_radial_bias(inspected):
         # the LS fit weighs the directions evenly, the score's mean every point: 3 µm apart
         assert err == pytest.approx(2 * m["mean_mm"], abs=0.003), spec
     # twin-corrected, the PVC pipe's diameter is right within its own U (16 spp: −0.75 µm,
-    # U 3.5 µm); the shiny alu pipe's is not (−21.5 µm: its axial waviness on a specular
+    # U 3.9 µm); the shiny alu pipe's is not (−21.5 µm: its axial waviness on a specular
     # surface, which the straight twin of one section does not model; docs/inspection.md)
     pvc = inspected["pvc-pipe"][0]
     assert abs(pvc["d_ls_mm"]["value"] - pvc["truth"]["d_ls_mm"]) <= pvc["d_ls_mm"]["U_k2"]

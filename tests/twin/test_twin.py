@@ -111,6 +111,19 @@ def test_twin_rig_reproduces_the_calibration(paper_rig):
     assert twin.camera.f_number == paper_rig.camera.f_number
 
 
+def test_perturbed_design_moves_one_input(paper_rig):
+    from lts360.twin.debias import perturbed_design
+
+    d = perturbed_design(paper_rig, "focus_distance_mm", 2.0)
+    assert d.camera.focus_distance_mm == paper_rig.camera.focus_distance_mm + 2.0
+    assert d.camera.f_number == paper_rig.camera.f_number
+    w = perturbed_design(paper_rig, "waist_rel", 0.1).laser
+    assert w.waist_um == pytest.approx(1.1 * paper_rig.laser.waist_um)
+    assert w.m_squared == pytest.approx(paper_rig.laser.m_squared)  # the same beam quality
+    with pytest.raises(ValueError, match="unknown twin input"):
+        perturbed_design(paper_rig, "colour", 1.0)
+
+
 def test_twin_rig_refuses_a_foreign_frame(paper_rig):
     import dataclasses
 
@@ -174,6 +187,12 @@ def test_the_twin_removes_the_line_centre_bias_of_a_rendered_gauge(small_gauge_f
     log = twin.log.summary()
     assert set(log) == {"direct", "left", "right"}
     assert all(v["n_uncorrected"] == 0 and v["mean_bias_um"] < -3 for v in log.values())
+    # the rig file's inputs moved by their u: each moves each view's correction by a little
+    from lts360.twin.debias import INPUT_U
+
+    for name, rec in twin.log.inputs.items():
+        assert set(rec["by_input_um"]) == set(INPUT_U)
+        assert 0 < rec["u_um"] < 5.0, (name, rec)
     # the correction moves the points along their rays and nothing else
     assert np.array_equal(plain.valid, corrected.valid)
     assert np.allclose(plain.theta_rad, corrected.theta_rad)
@@ -189,6 +208,19 @@ def test_measure_with_the_twin_records_it_in_the_cloud(small_gauge_frame, tmp_pa
     assert "twin bias correction: direct" in capsys.readouterr().out
     header = out.read_bytes().split(b"end_header")[0].decode()
     assert header.count("comment lts360 twin ") == 3
+    from lts360.recon.triangulation.cloud import read_cloud_twin
+
+    rec = read_cloud_twin(out)
+    assert set(rec) == {"direct", "left", "right"}
+    assert all(v["u_inputs_um"] > 0 and v["corrected"] > 100 for v in rec.values())
+    # inspect counts the correction's input u in the sizes' U
+    import json
+
+    assert main(["inspect", str(out), "--out", str(tmp_path / "ins")]) == 0
+    data = json.loads((tmp_path / "ins" / "inspection.json").read_text())
+    u_twin = data["settings"]["twin_u_inputs_mm"]
+    assert 0 < u_twin < 0.005
+    assert data["sections"][0]["d_ls_mm"]["u"] >= 2 * u_twin
 
 
 @pytest.mark.parametrize("extra, message", [

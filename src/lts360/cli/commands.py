@@ -300,6 +300,20 @@ def cmd_measure(args) -> int:
     return 0
 
 
+def _twin_u_mm(cloud_path) -> float | None:
+    """A twin-corrected cloud's radial u from the correction's inputs (mm): the points-weighted
+    RMS over the views of ``u_inputs_um``; ``None`` for a cloud without a twin record."""
+    from lts360.recon.triangulation.cloud import read_cloud_twin
+
+    rec = read_cloud_twin(cloud_path)
+    rows = [(v.get("corrected", 0.0), v.get("u_inputs_um", float("nan"))) for v in rec.values()]
+    rows = [(n, u) for n, u in rows if n > 0 and np.isfinite(u)]
+    if not rows:
+        return None
+    n, u = np.array(rows).T
+    return float(1e-3 * np.sqrt(np.sum(n * u * u) / np.sum(n)))
+
+
 def _twin_corrector(args, cal):
     """The ``--bias-model twin`` hook, or a usage error naming what is wrong."""
     from lts360.scenes.rig_io import load_rig
@@ -320,7 +334,8 @@ def _twin_corrector(args, cal):
 def _twin_comments(twin) -> list[str]:
     """PLY header lines: the bias the twin removed per view (µm) and its render uncertainty."""
     return [f"lts360 twin {name} bias_um {v['mean_bias_um']:+.3f} corrected {v['n_corrected']} "
-            f"uncorrected {v['n_uncorrected']} u_render_um {v['u_render_um']:.3f}"
+            f"uncorrected {v['n_uncorrected']} u_render_um {v['u_render_um']:.3f} "
+            f"u_inputs_um {v['u_inputs_um']:.3f}"
             for name, v in twin.log.summary().items()]
 
 
@@ -500,11 +515,20 @@ def cmd_inspect(args) -> int:
         from lts360.inspect.truth import load_truth
 
         truth = load_truth(args.truth)
+    u_radial = args.u_radial_mm
+    u_twin = _twin_u_mm(args.cloud)
+    if u_twin is not None:  # the bias correction's own type-B part, beside --u-radial-mm
+        u_radial = float(np.hypot(u_radial, u_twin))
     t0 = time.perf_counter()
     ins = inspect_cloud(cloud, nominal=nominal, band=band, calibration=cal, truth=truth,
                         lump_threshold_mm=args.lump_mm, n_draws=args.draws, seed=args.seed,
-                        u_radial_mm=args.u_radial_mm, filter_upr=args.filter_upr,
+                        u_radial_mm=u_radial, filter_upr=args.filter_upr,
                         source=str(args.cloud))
+    if u_twin is not None:
+        ins.data["settings"]["twin_u_inputs_mm"] = u_twin
+        print(f"  the cloud is twin-corrected: its inputs' u ({1e3 * u_twin:.2f} µm radial) is "
+              f"counted in the sizes' U" + (f" with --u-radial-mm {args.u_radial_mm:g}"
+                                            if args.u_radial_mm else ""))
     write_report(ins, out)
     d = ins.data
     tr = d["scan"]["trends"]["d_ls_mm"]

@@ -11,10 +11,13 @@ and the real radii become ``r − b``.  A valid point farther than ``smooth_deg 
 twin estimate of its view keeps its radius and is counted as uncorrected.
 
 What the correction cannot know is what the twin does not model: the real surface's micro-
-structure and material beyond the chosen BSDF, optics that differ from the rig file, and the
-geometry between the sections (the prism is straight).  ``u_render_um`` is the standard
-uncertainty the twin's render noise leaves in the correction; the rest belongs to a type-B
-budget (see docs/reconstruction.md).
+structure and material beyond the chosen BSDF, and the geometry between the sections (the prism
+is straight).  Two uncertainties of the correction are estimated and recorded per view:
+``u_render_um``, what the twin's render noise leaves in it, and ``u_inputs_um``, how much it
+moves when the rig file's optics are off by their standard uncertainty (:data:`INPUT_U`: the
+focus distance, the f-number, the sheet's waist), each found by rendering the twin again with
+that input moved (the same samples, so the difference is the input's) on the first section
+corrected and used for every section.
 """
 
 from __future__ import annotations
@@ -31,10 +34,14 @@ from lts360.scenes.rig import Rig
 from lts360.twin.profile import prism_mesh, ray_radii, section_profile
 from lts360.twin.rig import twin_rig
 
-__all__ = ["TwinCorrector", "TwinLog", "DEFAULT_TWIN_SPP", "DEFAULT_SMOOTH_DEG"]
+__all__ = ["TwinCorrector", "TwinLog", "DEFAULT_TWIN_SPP", "DEFAULT_SMOOTH_DEG", "INPUT_U",
+           "perturbed_design"]
 
 DEFAULT_TWIN_SPP = 64
 DEFAULT_SMOOTH_DEG = 3.0
+#: Standard uncertainties of the rig file's inputs the twin depends on (type B, a design's
+#: tolerances): focus distance (mm), f-number and the sheet's waist (relative).
+INPUT_U = {"focus_distance_mm": 2.0, "f_number_rel": 0.05, "waist_rel": 0.10}
 #: The twin's default render seed: not a frame's usual seed (a twin sharing the real render's
 #: sample pattern would cancel that render's sampling noise, which no real image has).
 TWIN_SEED = 0x7717
@@ -48,6 +55,8 @@ class TwinLog:
     sections: list = field(default_factory=list)
     render_s: float = 0.0
     measure_s: float = 0.0
+    #: Per view: the correction's change for each input moved by its u (µm), and their RSS.
+    inputs: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
         """Per view over all sections: mean bias (µm), points corrected and uncorrected."""
@@ -55,7 +64,9 @@ class TwinLog:
         for sec in self.sections:
             for name, d in sec["views"].items():
                 o = out.setdefault(name, {"bias_sum_um": 0.0, "n_corrected": 0,
-                                          "n_uncorrected": 0, "u_render_um": 0.0})
+                                          "n_uncorrected": 0, "u_render_um": 0.0,
+                                          "u_inputs_um": self.inputs.get(name, {}).get(
+                                              "u_um", float("nan"))})
                 o["bias_sum_um"] += d["mean_bias_um"] * d["n_corrected"]
                 o["n_corrected"] += d["n_corrected"]
                 o["n_uncorrected"] += d["n_uncorrected"]
@@ -68,8 +79,26 @@ class TwinLog:
         s = self.summary()
         return "twin bias correction: " + ", ".join(
             f"{k} {v['mean_bias_um']:+.2f} µm ({v['n_corrected']} pts"
-            + (f", {v['n_uncorrected']} uncorrected" if v["n_uncorrected"] else "") + ")"
-            for k, v in s.items()) + f"; render {self.render_s:.1f} s"
+            + (f", {v['n_uncorrected']} uncorrected" if v["n_uncorrected"] else "")
+            + (f", u(inputs) {v['u_inputs_um']:.2f} µm" if np.isfinite(v["u_inputs_um"]) else "")
+            + ")" for k, v in s.items()) + f"; render {self.render_s:.1f} s"
+
+
+def perturbed_design(design: Rig, key: str, u: float) -> Rig:
+    """``design`` with one input of :data:`INPUT_U` moved by ``u``."""
+    cam, las = design.camera, design.laser
+    if key == "focus_distance_mm":
+        return dataclasses.replace(design, camera=dataclasses.replace(
+            cam, focus_distance_mm=cam.focus_distance_mm + u))
+    if key == "f_number_rel":
+        return dataclasses.replace(design, camera=dataclasses.replace(
+            cam, f_number=cam.f_number * (1 + u)))
+    if key == "waist_rel":
+        w = las.waist_um * (1 + u)
+        # the beam quality is kept: z_R scales with w0²
+        return dataclasses.replace(design, laser=dataclasses.replace(
+            las, waist_um=w, rayleigh_range_mm=las.rayleigh_range_mm * (1 + u) ** 2))
+    raise ValueError(f"unknown twin input {key!r}; known: {', '.join(INPUT_U)}")
 
 
 def _nan_smooth(values: np.ndarray, size: int, wrap: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -106,6 +135,8 @@ class TwinCorrector:
         Smoothing of the bias along θ (and its reach across twin gaps).
     half_length_mm : float
         Half-length of the twin prism along the axis.
+    input_u : dict or None
+        The inputs' standard uncertainties (:data:`INPUT_U`); ``None``: not evaluated.
     """
 
     cal: Calibration
@@ -115,6 +146,7 @@ class TwinCorrector:
     seed: int = TWIN_SEED
     smooth_deg: float = DEFAULT_SMOOTH_DEG
     half_length_mm: float = 30.0
+    input_u: dict | None = field(default_factory=lambda: dict(INPUT_U))
     log: TwinLog = field(default_factory=TwinLog)
 
     def __post_init__(self) -> None:
@@ -195,6 +227,8 @@ class TwinCorrector:
         twin = measure(image)
         self.log.render_s += t1 - t0
         self.log.measure_s += time.perf_counter() - t1
+        if self.input_u and not self.log.inputs:
+            self._input_sensitivity(result, measure, plan, profile, twin)
         grid = result.grid
         size = max(1, int(round(np.radians(self.smooth_deg) / grid.theta_step_rad)))
         wrap = bool(grid.is_full_turn)
@@ -219,3 +253,39 @@ class TwinCorrector:
                 "n_corrected": int(ok.sum()), "n_uncorrected": int((v.valid & ~ok).sum()),
                 "u_render_um": 1e3 * u if np.isfinite(u) else 0.0}
         return dataclasses.replace(result, views=views)
+
+    def _view_bias_um(self, twin, verts) -> dict[str, float]:
+        """Each view's mean bias (µm) in a twin measurement of the prism ``verts``."""
+        out = {}
+        for name, tv in twin.views.items():
+            exact = ray_radii(verts, tv.theta_rad, near_mm=tv.r_mm)
+            b = (tv.r_mm - exact)[tv.valid]
+            b = b[np.isfinite(b)]
+            if b.size:
+                out[name] = float(1e3 * np.mean(b))
+        return out
+
+    def _input_sensitivity(self, result, measure, plan, profile, twin) -> None:
+        """Render the twin again with each input moved by its u (same seed) and record how
+        each view's mean bias moves (:attr:`TwinLog.inputs`)."""
+        from lts360.recon.triangulation.inverse import plan_pixels
+
+        verts = profile.vertices_mm
+        base = self._view_bias_um(twin, verts)
+        pixels = plan_pixels(plan)
+        seed = self.seed + len(self.log.sections) - 1
+        deltas: dict[str, dict[str, float]] = {name: {} for name in base}
+        t0 = time.perf_counter()
+        for key, u in self.input_u.items():
+            design = perturbed_design(self.design, key, u)
+            rig = twin_rig(plan.cal, design)
+            img = self.render(profile, pixels, seed=seed,
+                              exposure_fraction=self._exposure_fraction(result), rig=rig)
+            moved = self._view_bias_um(measure(img), verts)
+            for name in base:
+                if name in moved:
+                    deltas[name][key] = moved[name] - base[name]
+        self.log.render_s += time.perf_counter() - t0
+        self.log.inputs = {name: {"by_input_um": d,
+                                  "u_um": float(np.sqrt(sum(v * v for v in d.values())))}
+                           for name, d in deltas.items()}

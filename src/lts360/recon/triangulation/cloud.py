@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["VIEW_CODES", "VIEW_NAMES", "Cloud", "write_cloud", "read_cloud",
-           "read_cloud_rejections"]
+           "read_cloud_rejections", "read_cloud_twin"]
 
 VIEW_CODES = {"direct": 0, "left": 1, "right": 2, "left-right": 3, "right-left": 4, "fused": 9}
 VIEW_NAMES = {v: k for k, v in VIEW_CODES.items()}
@@ -144,6 +144,23 @@ def read_cloud_rejections(path) -> dict[str, int]:
         parts = line.split()
         if parts[:3] == ["comment", "lts360", "rejected"] and len(parts) == 5:
             out[parts[3]] = int(parts[4])
+    return out
+
+
+def read_cloud_twin(path) -> dict[str, dict[str, float]]:
+    """The digital twin's record in a cloud's header, per view (``{}`` without a twin):
+    ``bias_um``, ``corrected``, ``uncorrected``, ``u_render_um``, ``u_inputs_um``."""
+    with open(path, "rb") as f:
+        head = f.read(8192)
+    end = head.find(b"end_header")
+    out = {}
+    for line in head[:end if end >= 0 else None].decode("ascii", "replace").splitlines():
+        parts = line.split()
+        if parts[:3] == ["comment", "lts360", "twin"] and len(parts) >= 4 and len(parts) % 2 == 0:
+            try:
+                out[parts[3]] = {k: float(v) for k, v in zip(parts[4::2], parts[5::2])}
+            except ValueError:
+                continue
     return out
 
 
