@@ -134,31 +134,29 @@ def write_cloud(path, cloud: Cloud, *, comments=()) -> Path:
     return path
 
 
+def _lts360_comments(path, kind: str) -> list[list[str]]:
+    """The words after ``comment lts360 KIND`` of each such line of a cloud's header."""
+    with open(path, "rb") as f:
+        head = f.read(8192)
+    end = head.find(b"end_header")
+    lines = head[:end if end >= 0 else None].decode("ascii", "replace").splitlines()
+    return [p[3:] for p in (line.split() for line in lines)
+            if p[:3] == ["comment", "lts360", kind]]
+
+
 def read_cloud_rejections(path) -> dict[str, int]:
     """The rejection counts a cloud's header carries (``{}`` for a cloud written without)."""
-    with open(path, "rb") as f:
-        head = f.read(4096)
-    end = head.find(b"end_header")
-    out = {}
-    for line in head[:end if end >= 0 else None].decode("ascii", "replace").splitlines():
-        parts = line.split()
-        if parts[:3] == ["comment", "lts360", "rejected"] and len(parts) == 5:
-            out[parts[3]] = int(parts[4])
-    return out
+    return {w[0]: int(w[1]) for w in _lts360_comments(path, "rejected") if len(w) == 2}
 
 
 def read_cloud_twin(path) -> dict[str, dict[str, float]]:
     """The digital twin's record in a cloud's header, per view (``{}`` without a twin):
     ``bias_um``, ``corrected``, ``uncorrected``, ``u_render_um``, ``u_inputs_um``."""
-    with open(path, "rb") as f:
-        head = f.read(8192)
-    end = head.find(b"end_header")
     out = {}
-    for line in head[:end if end >= 0 else None].decode("ascii", "replace").splitlines():
-        parts = line.split()
-        if parts[:3] == ["comment", "lts360", "twin"] and len(parts) >= 4 and len(parts) % 2 == 0:
+    for w in _lts360_comments(path, "twin"):
+        if len(w) >= 1 and len(w) % 2 == 1:
             try:
-                out[parts[3]] = {k: float(v) for k, v in zip(parts[4::2], parts[5::2])}
+                out[w[0]] = {k: float(v) for k, v in zip(w[1::2], w[2::2])}
             except ValueError:
                 continue
     return out
