@@ -10,6 +10,7 @@ the fan, the power, the mirrors' extents and reflectance, the sensor.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,11 +18,18 @@ import numpy as np
 from lts360.recon.calibration.model import Calibration
 from lts360.scenes.rig import Camera, Mirror, Rig
 
-__all__ = ["CalibratedCamera", "twin_rig", "MAX_FRAME_MISMATCH_MM"]
+__all__ = ["CalibratedCamera", "twin_rig", "MAX_FRAME_MISMATCH_MM", "MAX_MIRROR_TILT_DEG"]
 
 #: The rig file's camera centre and the calibrated one (measurement frame) may differ by at most
 #: this much: more means the calibration's measurement frame is not the rig file's world frame.
 MAX_FRAME_MISMATCH_MM = 25.0
+#: Largest tilt of a calibrated mirror out of perpendicular to the calibrated laser plane that
+#: the twin accepts.  The twin reflects the sheet in its mirrors as it renders: a mirror tilted
+#: by δ lights the back of the section about 2δ·(mirror distance) off the plane the
+#: measurement assumes, and the mirror views then read tens of µm off (measured: +30 / +50 µm
+#: for 0.03° / 0.05°, ~1 µm per 0.001°).  A calibration's planes carry errors of that size, so
+#: a twin built on them would correct a bias no real rig with perpendicular mirrors shows.
+MAX_MIRROR_TILT_DEG = 0.0005
 
 
 @dataclass(frozen=True, eq=False)
@@ -84,8 +92,10 @@ def twin_rig(cal: Calibration, design: Rig) -> Rig:
     Raises
     ------
     ValueError
-        The calibration's mirrors are not the rig file's, or its measurement frame is not the
-        rig file's world frame (camera centres more than :data:`MAX_FRAME_MISMATCH_MM` apart).
+        The calibration's mirrors are not the rig file's, its measurement frame is not the
+        rig file's world frame (camera centres more than :data:`MAX_FRAME_MISMATCH_MM` apart),
+        or a mirror is tilted out of perpendicular to the laser plane by more than
+        :data:`MAX_MIRROR_TILT_DEG`.
     """
     cam = design.camera
     w, h = cal.image_size
@@ -106,6 +116,15 @@ def twin_rig(cal: Calibration, design: Rig) -> Rig:
         raise ValueError(f"twin: the calibration's mirrors {sorted(names)} are not rig "
                          f"{design.name!r}'s {sorted(m.name for m in design.mirrors)}")
     mirrors = tuple(_mirror(cal, m, camera.center_mm) for m in design.mirrors)
+    tilts = {m.name: math.degrees(math.asin(min(abs(float(m.normal[2])), 1.0))) for m in mirrors}
+    worst = max(tilts, key=tilts.get)
+    if tilts[worst] > MAX_MIRROR_TILT_DEG:
+        raise ValueError(
+            f"twin: the calibration's mirror {worst!r} is {tilts[worst]:.4f}° out of "
+            f"perpendicular to its laser plane (at most {MAX_MIRROR_TILT_DEG:g}°): the twin "
+            f"would light the back of the section off the plane and correct the mirror views "
+            f"by tens of µm no real rig shows; it needs the true rig's calibration (a frame's "
+            f"frame.json)")
     las = design.laser
     # The sheet is the calibrated plane z = 0 of the measurement frame; the apex and the fan's
     # direction are the rig file's, moved into it.
