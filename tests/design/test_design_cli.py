@@ -17,6 +17,9 @@ from lts360.scenes.rig_io import load_rig
     (["--diameters-mm", "20,x"], "comma-separated numbers"),
     (["--diameters-mm", "-3"], "diameters_mm: must be positive"),
     (["--min-coverage-deg", "400"], "min_coverage_deg: must be in [0, 360]"),
+    (["--calibration", "no-such.json"], "--calibration: no file 'no-such.json'"),
+    (["--compensation-shots", "0"], "compensation_shots: must be an integer in [1, 100]"),
+    (["--compensation-diameter-mm", "-1"], "compensation_diameter_mm: must be a positive"),
 ])
 def test_optimize_bad_input(tmp_path, capsys, argv, message):
     out = tmp_path / "out"
@@ -50,6 +53,33 @@ def test_optimize_writes_a_loadable_rig_and_the_report(tmp_path, capsys):
     assert opt["objective_um"] <= rep["designs"][1]["objective_um"] + 1e-9
     assert rig.design.alpha_deg == pytest.approx(opt["parameters"]["alpha_deg"])
     assert "gradient optimum" in (out / "report.txt").read_text()
+    # the compensation's share is in U by default, and reported apart
+    assert opt["sigma_R_compensation_um"] > 0
+    assert opt["U_um"] == pytest.approx(2 * opt["sigma_R_um"], rel=1e-9)
+    assert "share: §4.4 compensation" in (out / "report.txt").read_text()
+
+
+@pytest.mark.slow  # ~15 s: records the models with a calibration covariance
+def test_optimize_with_a_calibration_file(tmp_path):
+    unc = {"camera": {"std": {"fx": 0.2, "fy": 0.2, "cx": 0.15, "cy": 0.15, "k1": 4e-4,
+                              "k2": 1e-3}},
+           "mirrors": {m: {"cov_abd": [[1.4e-4 ** 2, 0, 0], [0, 1e-4 ** 2, 0], [0, 0, 0.02 ** 2]]}
+                       for m in ("left", "right")},
+           "laser_plane": {"cov_abd": [[5e-4 ** 2, 0, 0], [0, 1.4e-4 ** 2, 0],
+                                       [0, 0, 0.06 ** 2]]}}
+    cal = tmp_path / "calibration.json"
+    cal.write_text(json.dumps({"uncertainty": unc}))
+    out = tmp_path / "opt"
+    assert main(["design", "optimize", "--out", str(out), "--free", "alpha_deg",
+                 "--starts", "1", "--grid-per-axis", "3", "--n-theta", "90",
+                 "--diameters-mm", "20", "--calibration", str(cal)]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    opt = rep["designs"][2]
+    assert opt["sigma_R_calibration_um"] > 0.1
+    assert rep["conditions"]["calibration"]["source"] == str(cal)
+    assert opt["sigma_R_um"] == pytest.approx(
+        (opt["sigma_R_noise_um"] ** 2 + opt["sigma_R_compensation_um"] ** 2
+         + opt["sigma_R_calibration_um"] ** 2) ** 0.5, rel=1e-6)
 
 
 @pytest.mark.slow  # ~5 s: records the batched model

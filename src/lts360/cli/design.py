@@ -45,8 +45,28 @@ def _space_and_conditions(args):
     cond = Conditions(diameters_mm=_floats(args.diameters_mm, "--diameters-mm"),
                       placement_mm=args.placement_mm, min_coverage_deg=args.min_coverage_deg,
                       min_overlap_deg=args.min_overlap_deg, margin_px=args.image_margin_px,
-                      speckle=args.speckle, n_theta=args.n_theta)
+                      speckle=args.speckle, n_theta=args.n_theta,
+                      compensate=not args.no_compensation,
+                      compensation_diameter_mm=args.compensation_diameter_mm,
+                      compensation_shots=args.compensation_shots,
+                      calibration=_calibration(args.calibration))
     return space, cond
+
+
+def _calibration(source):
+    """``--calibration``: none, or a calibration JSON whose covariance the model propagates."""
+    from lts360.design.shares import CalibrationCovariance
+
+    if source is None or source == "none":
+        return None
+    path = Path(source)
+    if not path.is_file():
+        raise UsageError(f"--calibration: no file {source!r} (a calibration JSON written by "
+                         "lts360 calibrate, or 'none')")
+    try:
+        return CalibrationCovariance.from_file(path)
+    except (ValueError, json.JSONDecodeError) as exc:
+        raise UsageError(f"--calibration {source}: {exc}") from None
 
 
 def _write_dir(out: Path, files: dict[str, str | bytes]) -> None:
@@ -150,6 +170,15 @@ def add_design_parser(sub) -> None:
         q.add_argument("--image-margin-px", type=float, default=20.0)
         q.add_argument("--speckle", default="pixel", choices=("pixel", "dorsch"))
         q.add_argument("--n-theta", type=int, default=180, help="θ samples of the model")
+        q.add_argument("--no-compensation", action="store_true", help="the measurement "
+                       "without the §4.4 compensation (default: with it; its own noise counts)")
+        q.add_argument("--compensation-diameter-mm", type=float, default=19.9987,
+                       help="the compensation's reference, centred (default the plug gauge)")
+        q.add_argument("--compensation-shots", type=int, default=1,
+                       help="reference images the compensation is fitted to")
+        q.add_argument("--calibration", default=None, metavar="FILE|none",
+                       help="add the share of a calibration with this file's covariance "
+                       "(lts360 calibrate's calibration.json); default none")
 
     q = ds.add_parser("optimize", help="multi-start L-BFGS-B on the model, seeded by a grid "
                       "of it; writes rig.toml and a report")

@@ -47,6 +47,7 @@ import numpy as np
 
 from lts360.design.locking import LOCKING_COEFFS, SIGMA_MAX, SIGMA_MIN
 from lts360.design.params import PARAMETERS, DesignError, DesignSpace
+from lts360.design.shares import CalibrationCovariance, compensation_shares
 from lts360.scenes.coverage import mirror_sequences, view_name
 
 __all__ = ["Conditions", "Evaluation", "evaluate", "evaluate_batch", "pixel_speckle_contrast",
@@ -123,6 +124,16 @@ class Conditions:
         the share of the section also seen through both mirrors.
     penalty_um_per_deg2 : float
         Weight of a squared shortfall (µm of U per deg² of missing coverage or overlap).
+    compensate : bool
+        The measurement applies the §4.4 compensation (one circle and a translation per mirror
+        view fitted on a reference image); its own noise then adds to every case's radius
+        (:mod:`lts360.design.shares`), and it absorbs the calibration's view translations.
+    compensation_diameter_mm, compensation_shots : float, int
+        The reference: a centred round section of this diameter (the plug gauge), imaged
+        ``compensation_shots`` times and fitted jointly.
+    calibration : CalibrationCovariance or None
+        The calibration's covariance; its share of the radius is added (None: a perfectly
+        calibrated rig).
     """
 
     diameters_mm: tuple = (20.0,)
@@ -137,6 +148,10 @@ class Conditions:
     min_overlap_deg: float = 5.0
     max_multi_reflection_pct: float = 0.0
     penalty_um_per_deg2: float = 1.0
+    compensate: bool = True
+    compensation_diameter_mm: float = 19.9987
+    compensation_shots: int = 1
+    calibration: CalibrationCovariance | None = None
 
     def __post_init__(self) -> None:
         d = tuple(float(v) for v in np.atleast_1d(self.diameters_mm))
@@ -163,6 +178,16 @@ class Conditions:
             raise DesignError(f"min_overlap_deg: must be in [0, 180], got {self.min_overlap_deg}")
         if not 0 <= self.max_multi_reflection_pct <= 100:
             raise DesignError("max_multi_reflection_pct: must be in [0, 100]")
+        if not (math.isfinite(self.compensation_diameter_mm) and self.compensation_diameter_mm > 0):
+            raise DesignError("compensation_diameter_mm: must be a positive number, got "
+                              f"{self.compensation_diameter_mm}")
+        if not (isinstance(self.compensation_shots, (int, np.integer))
+                and 1 <= self.compensation_shots <= 100):
+            raise DesignError("compensation_shots: must be an integer in [1, 100], got "
+                              f"{self.compensation_shots!r}")
+        if self.calibration is not None and not isinstance(self.calibration,
+                                                           CalibrationCovariance):
+            raise DesignError("calibration: must be a CalibrationCovariance or None")
 
     def cases(self) -> list[tuple[float, float, float]]:
         """``(radius_mm, cx_mm, cy_mm)`` of every case."""
@@ -171,6 +196,12 @@ class Conditions:
             p = self.placement_mm
             offs += [(p, 0.0), (-p, 0.0), (0.0, p), (0.0, -p)]
         return [(d / 2.0, cx, cy) for d in self.diameters_mm for cx, cy in offs]
+
+    def model_cases(self) -> list[tuple[float, float, float]]:
+        """The cases the model computes: :meth:`cases`, then the compensation's reference
+        (the last one) when the compensation is modelled."""
+        ref = [(self.compensation_diameter_mm / 2.0, 0.0, 0.0)] if self.compensate else []
+        return self.cases() + ref
 
 
 @dataclasses.dataclass
@@ -187,13 +218,19 @@ class Evaluation:
     U_um, sigma_R_um, point_rms_um, coverage_deg, overlap_direct_left_deg,
     overlap_direct_right_deg, overlap_left_right_deg, multi_reflection_pct, penalty_um,
     speckle_rms_um : (n_cases,) float
-        Per case: the radius' expanded uncertainty (k = 2) and σ after the circle fit, the rms
+        Per case: the radius' expanded uncertainty (k = 2) and σ after the circle fit (all
+        shares: the image's noise, the compensation's, the calibration's), the rms
         per-point σ_r, the smooth single-view coverage and overlaps, the smooth share seen
         through both mirrors, the constraint penalty, the rms per-point σ_r of speckle alone.
+    sigma_R_noise_um, sigma_R_comp_um, sigma_R_cal_um : (n_cases,) float
+        The shares of ``sigma_R_um`` (added in quadrature): the measured image's own noise,
+        the §4.4 compensation's noise (0 without compensation), the calibration's (0 without
+        a covariance).
     detail : dict or None
         Per view, per-element arrays (``theta_rad``, ``uv`` (n, 2) px, ``measured`` (soft),
-        ``seen``, ``sigma_r_um``, ``sensitivity_mm_per_px``, ``width_px``, ``noise_px`` by term)
-        when requested.
+        ``seen``, ``sigma_r_um``, ``sensitivity_mm_per_px``, ``width_px``, ``noise_px`` by term,
+        and with a calibration covariance ``cal_dr_mm``: per calibration parameter, in the
+        order of its ``names``, the radius change per unit of it) when requested.
     """
 
     objective: float
@@ -209,6 +246,9 @@ class Evaluation:
     multi_reflection_pct: np.ndarray
     penalty_um: np.ndarray
     speckle_rms_um: np.ndarray
+    sigma_R_noise_um: np.ndarray | None = None
+    sigma_R_comp_um: np.ndarray | None = None
+    sigma_R_cal_um: np.ndarray | None = None
     detail: dict | None = None
 
     @property
@@ -392,6 +432,115 @@ def _trace(o: _Ops, X, target, seq, mirrors, centre_xy, r, w_mm, w_cos):
     return s, leave, direction, length
 
 
+def _camera_frame_normals(space: DesignSpace) -> dict:
+    """The model's plane normals in the base design's camera frame (``{plane: n}``), to
+    orient a stored calibration covariance (:meth:`CalibrationCovariance.oriented`)."""
+    v = space.values()
+    a = math.radians(v["alpha_deg"])
+    R = np.array([[1.0, 0.0, 0.0], [0.0, -math.sin(a), -math.cos(a)],
+                  [0.0, math.cos(a), -math.sin(a)]])
+    half = math.radians(v["beta_deg"]) / 2.0
+    out = {"laser": R @ np.array([0.0, 0.0, 1.0])}
+    for sx, m in zip((-1.0, 1.0), space.base.mirrors):
+        out[m.name] = R @ np.array([-sx * math.cos(half), -math.sin(half), 0.0])
+    return out
+
+
+def _tangent_world(o: _Ops, R, n_world):
+    """The calibration's tangent basis (``tangent_basis`` of the plane's camera-frame normal)
+    carried back to the world.  Every normal of the design space has |n_cam.x| < 0.9 (the
+    laser's is 0, a mirror's cos(β/2) ≤ 0.87), so the reference axis is always x."""
+    dr, V3 = o.dr, o.V3
+    n = V3(*_rot(R, n_world))
+    e1 = dr.normalize(dr.cross(n, V3(1.0, 0.0, 0.0)))
+    e2 = dr.cross(n, e1)
+
+    def back(e):  # Rᵀ e
+        return V3(e.x, R[1][1] * e.y + R[2][1] * e.z, R[1][2] * e.y + R[2][2] * e.z)
+
+    return back(e1), back(e2)
+
+
+def _calibration_dr(o: _Ops, geo: dict, vw: dict, mirrors, mirror_names, names, X, ct, st,
+                    dist: "_Distortion"):
+    """Per element, the radius change ``δr^k`` (mm per unit) of every calibration parameter.
+
+    The stripe stays at the pixel ``u`` where the true rig images ``X``; the reconstruction,
+    with the calibration moved by ``δc_k``, finds the point ``X'`` of its laser plane whose
+    (mirrored) projection is ``u``.  For the intrinsics and the mirrors
+    ``[∂u/∂r ∂u/∂θ] (δr, δθ) = −δu_k`` (``δu_k`` the change of the projection of the fixed
+    ``X``); for the laser plane ``X'`` slides along the (virtual) camera ray to the moved
+    plane, ``δr = r̂ · w (δd − δn·X)/(n·w)``.  A plane's ``(a, b, δ)`` turns its camera-frame
+    normal and shifts its camera-frame offset: in the world ``δn = Rᵀ e``, ``δd = δ + δn·C``
+    (C the camera centre).
+    """
+    dr, V3 = o.dr, o.V3
+    jr, jt = vw["jr"], vw["jt"]
+    cross = vw["cross"]
+    seq = vw["seq"]
+    xn, yn, zs = vw["xn"], vw["yn"], vw["zs"]
+    f = geo["f_px"]
+    xd, yd = dist.apply(xn, yn)
+    r2 = xn * xn + yn * yn
+    pos, R = geo["pos"], geo["R"]
+
+    def from_du(du0, du1):
+        # jr δr + jt δθ = −δu  →  δr = (δu × jt) / (jt × jr), with a × b = a0 b1 − a1 b0.
+        return (du0 * jt[1] - du1 * jt[0]) / cross
+
+    def jac_world(e):  # ∂u/∂Y · e at the view's (virtual) point Y
+        dxc, dyc, dzc = _rot(R, e)
+        dxn = (dxc - xn * dzc) / zs
+        dyn = (dyc - yn * dzc) / zs
+        ddx, ddy = dist.jacobian_apply(xn, yn, dxn, dyn)
+        return f * ddx, f * ddy
+
+    zero = 0.0 * ct
+    cam = {"fx": (xd, zero), "fy": (zero, yd), "cx": (1.0 + zero, zero),
+           "cy": (zero, 1.0 + zero), "k1": (f * xn * r2, f * yn * r2),
+           "k2": (f * xn * r2 * r2, f * yn * r2 * r2),
+           "k3": (f * xn * r2 * r2 * r2, f * yn * r2 * r2 * r2),
+           "p1": (f * 2.0 * xn * yn, f * (r2 + 2.0 * yn * yn)),
+           "p2": (f * (r2 + 2.0 * xn * xn), f * 2.0 * xn * yn)}
+    # The (virtual) camera centre of the view, and the ray direction to X.
+    c_v = pos
+    for kk in seq:
+        c_v = o.reflect_point(c_v, mirrors[kk].n, mirrors[kk].d)
+    w = X - c_v
+    w_r = w.x * ct + w.y * st
+    bases = {}
+    out = []
+    for full in names:
+        plane, _, p = full.partition(".")
+        if plane == "camera":
+            out.append(from_du(*cam[p]))
+            continue
+        if plane not in bases:
+            n_w = V3(0.0, 0.0, 1.0) if plane == "laser" else mirrors[mirror_names.index(plane)].n
+            bases[plane] = _tangent_world(o, R, n_w)
+        if p == "delta":
+            dn, dd = None, 1.0
+        else:
+            e = bases[plane][0 if p == "a" else 1]
+            dn, dd = e, dr.dot(e, pos)
+        if plane == "laser":
+            t = (dd - (0.0 if dn is None else dr.dot(dn, X))) / w.z
+            out.append(t * w_r)
+            continue
+        k = mirror_names.index(plane)
+        if k not in seq:  # this view does not reflect in that mirror
+            out.append(zero)
+            continue
+        m = mirrors[k]
+        s_m = dr.dot(m.n, X) - m.d
+        if dn is None:
+            dY = m.n * (2.0 * dd)
+        else:
+            dY = dn * (-2.0 * s_m) - m.n * (2.0 * (dr.dot(dn, X) - dd))
+        out.append(from_du(*jac_world(dY)))
+    return out
+
+
 # ----------------------------------------------------------------------------------- the model
 def evaluate(space: DesignSpace, x=None, conditions: Conditions | None = None, *,
              gradient: bool = True, detail: bool = False) -> Evaluation:
@@ -415,7 +564,7 @@ def evaluate(space: DesignSpace, x=None, conditions: Conditions | None = None, *
         o = _Ops()
         res = _run(o, space, cond, o.F(pvec), _grid(o, cond), gradient=False, keep=True)
         det = _detail(o, res.pop("_views"), res.pop("_singles"), res.pop("_theta"),
-                      int(cond.n_theta), len(cond.cases()))
+                      int(cond.n_theta), len(cond.model_cases()), len(cond.cases()))
     else:
         res = _frozen(space, cond, gradient)(pvec)
         det = None
@@ -432,7 +581,9 @@ def evaluate(space: DesignSpace, x=None, conditions: Conditions | None = None, *
                       overlap_direct_left_deg=out["ov_dl"], overlap_direct_right_deg=out["ov_dr"],
                       overlap_left_right_deg=out["ov_lr"], multi_reflection_pct=out["multi"],
                       penalty_um=out["penalty_um"], speckle_rms_um=out["speckle_rms_um"],
-                      detail=det)
+                      sigma_R_noise_um=out["sigma_R_noise_um"],
+                      sigma_R_comp_um=out["sigma_R_comp_um"],
+                      sigma_R_cal_um=out["sigma_R_cal_um"], detail=det)
 
 
 _FROZEN: dict = {}
@@ -467,14 +618,19 @@ def _frozen(space: DesignSpace, cond: Conditions, gradient: bool):
 
 def _grid(o: "_Ops", cond: Conditions, designs: int = 1) -> dict:
     """The (design, case, θ) elements as Dr.Jit arrays (made outside the recorded function)."""
-    cases = cond.cases()
-    n_th, n_case = int(cond.n_theta), len(cases)
+    cases = cond.model_cases()
+    n_th, n_case, n_user = int(cond.n_theta), len(cases), len(cond.cases())
     blocks = designs * n_case
     th = np.tile(-math.pi + np.arange(n_th) * (2.0 * math.pi / n_th), blocks)
     cs = np.repeat(np.tile(np.asarray(cases, dtype=float), (designs, 1)), n_th, axis=0)
     block = np.repeat(np.arange(blocks), n_th)
+    d_of_user = np.repeat(np.arange(designs), n_user)
+    user = d_of_user * n_case + np.tile(np.arange(n_user), designs)
+    # Each reported case reads its design's reference (the last model case).
+    ref = d_of_user * n_case + (n_case - 1)
     out = dict(theta=o.F(th), ct=o.F(np.cos(th)), st=o.F(np.sin(th)), r=o.F(cs[:, 0]),
-               cx=o.F(cs[:, 1]), cy=o.F(cs[:, 2]), ci=o.U(block), di=o.U(block // n_case))
+               cx=o.F(cs[:, 1]), cy=o.F(cs[:, 2]), ci=o.U(block), di=o.U(block // n_case),
+               user=o.U(user), ref=o.U(ref))
     o.dr.eval(out)
     return out
 
@@ -521,7 +677,7 @@ def evaluate_batch(space: DesignSpace, X, conditions: Conditions | None = None) 
         _FROZEN[key] = (space, call)
         hit = _FROZEN[key]
     call = hit[1]
-    n_case = len(cond.cases())
+    n_case = len(cond.cases())  # the reported cases (the outputs are gathered to them)
     parts: dict = {}
     for start in range(0, len(full), BATCH):
         chunk = full[start:start + BATCH]
@@ -642,6 +798,7 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
         jz = jac(V3(0.0 * ct, 0.0 * ct, 1.0 + 0.0 * ct))
         jt_norm = dr.sqrt(jt[0] * jt[0] + jt[1] * jt[1] + 1e-24)
         cross = jt[0] * jr[1] - jt[1] * jr[0]
+        vw.update(jr=jr, jt=jt, cross=dr.select(dr.abs(cross) > 1e-12, cross, 1e-12))
         sens = jt_norm / dr.sqrt(cross * cross + 1e-24)  # mm per px across the line
         nz = (-jt[1] * jz[0] + jt[0] * jz[1]) / jt_norm
         sig_geo = sig_sheet_eff * dr.sqrt(nz * nz + 1e-24)
@@ -687,6 +844,10 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
     sums = {key: 0.0 for key in ("a", "b", "c", "d", "e", "f", "Sa", "Sb", "Sc", "Sd", "Se",
                                  "Sf", "m", "msr2", "msp2")}
     nu = math.degrees(step) / cond.theta_step_meas_deg  # measured points per model sample
+    mir_names = [m_.name for m_ in base.mirrors]
+    cal = cond.calibration
+    cal_names = list(cal.names) if cal is not None else []
+    view_A, view_B, view_dr = {}, {}, {}
     for name in singles:
         vw = views[name]
         sw = vw["sig_w"]
@@ -723,6 +884,13 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
         m = vw["detected"] * nu
         corr = 1.0 + CORRELATION_PX / (vw["arc_px"] + 1e-12)
         w2 = m * corr * sr_mm * sr_mm
+        basis6 = (1.0, ct, st, ct * ct, ct * st, st * st)
+        view_A[name] = [m * b for b in basis6]
+        view_B[name] = [w2 * b for b in basis6]
+        if cal_names:
+            vw["cal_dr"] = _calibration_dr(o, geo, vw, mirrors, mir_names, cal_names, X, ct, st,
+                                           dist)
+            view_dr[name] = [[m * dk, m * dk * ct, m * dk * st] for dk in vw["cal_dr"]]
         for key, val in (("a", 1.0), ("b", ct), ("c", st), ("d", ct * ct), ("e", ct * st),
                          ("f", st * st)):
             sums[key] = sums[key] + m * val
@@ -738,10 +906,40 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
     var_R = (g0 * (cs["Sa"] * g0 + cs["Sb"] * g1 + cs["Sc"] * g2)
              + g1 * (cs["Sb"] * g0 + cs["Sd"] * g1 + cs["Se"] * g2)
              + g2 * (cs["Sc"] * g0 + cs["Se"] * g1 + cs["Sf"] * g2))
-    sigma_R_um = dr.sqrt(dr.maximum(var_R, 0.0) + 1e-18) * 1e3  # finite slope when 0
+    var_noise = dr.maximum(var_R, 0.0)
+    # --- the §4.4 compensation's noise and the calibration's share --------------------------
+    user, refi = grid["user"], grid["ref"]
+
+    def at_user(v):
+        return dr.gather(F, v, user)
+
+    def at_ref(v):
+        return dr.gather(F, v, refi)
+
+    var_comp, var_cal = 0.0 * at_user(var_noise), 0.0 * at_user(var_noise)
+    if cond.compensate or cal_names:
+        A_sums = {nm: [case_sum(v) for v in view_A[nm]] for nm in singles}
+        B_sums = {nm: [case_sum(v) for v in view_B[nm]] for nm in singles}
+        dr_sums = {nm: [[case_sum(v) for v in trio] for trio in view_dr[nm]]
+                   for nm in view_dr}
+        cov = (cal.oriented(_camera_frame_normals(space)) if cal is not None else None)
+        var_comp, var_cal = compensation_shares(
+            {nm: [at_user(v) for v in A_sums[nm]] for nm in singles},
+            {nm: [at_ref(v) for v in A_sums[nm]] for nm in singles},
+            {nm: [at_ref(v) for v in B_sums[nm]] for nm in singles},
+            {nm: [[at_user(v) for v in trio] for trio in dr_sums[nm]] for nm in dr_sums},
+            {nm: [[at_ref(v) for v in trio] for trio in dr_sums[nm]] for nm in dr_sums},
+            cov, [nm for nm in singles if nm != "direct"], dr.sqrt,
+            shots=int(cond.compensation_shots), compensate=bool(cond.compensate))
+    var_noise = at_user(var_noise)
+    sigma_R_noise_um = dr.sqrt(var_noise + 1e-18) * 1e3
+    sigma_R_comp_um = dr.sqrt(dr.maximum(var_comp, 0.0) + 1e-18) * 1e3
+    sigma_R_cal_um = dr.sqrt(dr.maximum(var_cal, 0.0) + 1e-18) * 1e3
+    sigma_R_um = dr.sqrt(var_noise + dr.maximum(var_comp, 0.0) + dr.maximum(var_cal, 0.0)
+                         + 1e-18) * 1e3  # finite slope when 0
     U_um = 2.0 * sigma_R_um
-    point_rms_um = dr.sqrt(cs["msr2"] / (cs["m"] + 1e-30)) * 1e3
-    speckle_rms_um = dr.sqrt(cs["msp2"] / (cs["m"] + 1e-30)) * 1e3
+    point_rms_um = at_user(dr.sqrt(cs["msr2"] / (cs["m"] + 1e-30)) * 1e3)
+    speckle_rms_um = at_user(dr.sqrt(cs["msp2"] / (cs["m"] + 1e-30)) * 1e3)
 
     # --- coverage, overlaps, multiple reflections, penalties --------------------------------
     step_deg = math.degrees(step)
@@ -771,16 +969,18 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
         rig_pen = rig_pen + o.relu2(1.0 - (dr.dot(m.n, geo["laser"]) - m.d))
     rig_pen = rig_pen + o.relu2(1.0 - (s_f - f_mm))
     rig_pen = case_sum(rig_pen * (1.0 / n_th))  # the same in every element: per case
-    pen = pen + 1e3 * rig_pen
+    pen = at_user(pen + 1e3 * rig_pen)
     J_case = U_um + pen
     res = dict(J_case=J_case, U_um=U_um, sigma_R_um=sigma_R_um, point_rms_um=point_rms_um,
-               coverage_deg=cov, ov_dl=ov_dl, ov_dr=ov_dr, ov_lr=ov_lr, multi=multi,
-               penalty_um=pen, speckle_rms_um=speckle_rms_um)
+               coverage_deg=at_user(cov), ov_dl=at_user(ov_dl), ov_dr=at_user(ov_dr),
+               ov_lr=at_user(ov_lr), multi=at_user(multi), penalty_um=pen,
+               speckle_rms_um=speckle_rms_um, sigma_R_noise_um=sigma_R_noise_um,
+               sigma_R_comp_um=sigma_R_comp_um, sigma_R_cal_um=sigma_R_cal_um)
     if gradient:
         # The worst case (ties share): the max is taken on detached values.
         # (Reductions by scatter: they are kernel operations, which dr.freeze records.)
         Jd = dr.detach(J_case)
-        one = dr.zeros(U, n_case)
+        one = dr.zeros(U, dr.width(J_case))
         jmax = dr.full(F, -1e300, 1)
         dr.scatter_reduce(dr.ReduceOp.Max, jmax, Jd, one)
         w = dr.select(Jd >= dr.gather(F, jmax, one), F(1.0), F(0.0))
@@ -796,9 +996,10 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
     return res
 
 
-def _detail(o: _Ops, views, singles, theta, n_th, n_case) -> dict:
+def _detail(o: _Ops, views, singles, theta, n_th, n_case, n_user) -> dict:
     def arr(v):
-        return np.asarray(o.dr.detach(v).numpy(), dtype=float).reshape(n_case, n_th)
+        a = np.asarray(o.dr.detach(v).numpy(), dtype=float)
+        return a.reshape(n_case, n_th)[:n_user]
 
     out = {"theta_rad": arr(theta)[0]}
     for name, vw in views.items():
@@ -812,5 +1013,7 @@ def _detail(o: _Ops, views, singles, theta, n_th, n_case) -> dict:
                      blur_px=arr(vw["sig_blur"]), sheet_px=arr(vw["sig_geo"]),
                      e_peak=arr(vw["e_peak"]),
                      noise_px={k: arr(v) for k, v in vw["noise"].items()})
+            if "cal_dr" in vw:
+                d["cal_dr_mm"] = [arr(v) for v in vw["cal_dr"]]
         out[name] = d
     return out

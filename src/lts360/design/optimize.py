@@ -48,6 +48,9 @@ class Candidate:
     penalty_um: float
     hard: dict | None
     evaluations: int = 0
+    sigma_R_noise_um: float = float("nan")
+    sigma_R_comp_um: float = float("nan")
+    sigma_R_cal_um: float = float("nan")
     seconds: float = 0.0
     reach_grid_best: list | None = None
 
@@ -57,7 +60,9 @@ class Candidate:
     def as_dict(self, space: DesignSpace) -> dict:
         return {"label": self.label, "parameters": dict(zip(space.free, map(float, self.x))),
                 "objective_um": self.objective, "U_um": self.U_um,
-                "sigma_R_um": self.sigma_R_um, "point_rms_um": self.point_rms_um,
+                "sigma_R_um": self.sigma_R_um, "sigma_R_noise_um": self.sigma_R_noise_um,
+                "sigma_R_compensation_um": self.sigma_R_comp_um,
+                "sigma_R_calibration_um": self.sigma_R_cal_um, "point_rms_um": self.point_rms_um,
                 "coverage_smooth_deg": self.coverage_deg, "penalty_um": self.penalty_um,
                 "hard": self.hard, "evaluations": self.evaluations, "seconds": self.seconds,
                 "evaluations_seconds_to_beat_grid_best": self.reach_grid_best}
@@ -126,7 +131,10 @@ def _candidate(space, cond, x, label, *, evaluations=0, seconds=0.0) -> Candidat
                      U_um=float(np.max(e.U_um)), sigma_R_um=float(np.max(e.sigma_R_um)),
                      point_rms_um=float(e.point_rms_um[k]),
                      coverage_deg=float(np.min(e.coverage_deg)), penalty_um=float(e.penalty_um[k]),
-                     hard=hard_metrics(space, x, cond), evaluations=evaluations, seconds=seconds)
+                     hard=hard_metrics(space, x, cond), evaluations=evaluations, seconds=seconds,
+                     sigma_R_noise_um=float(e.sigma_R_noise_um[k]),
+                     sigma_R_comp_um=float(e.sigma_R_comp_um[k]),
+                     sigma_R_cal_um=float(e.sigma_R_cal_um[k]))
 
 
 def grid_search(space: DesignSpace, cond: Conditions, *, points_per_axis: int = 3,
@@ -254,11 +262,24 @@ def report_dict(res: OptimizeResult) -> dict:
     sp, cond = res.space, res.conditions
     return {"base_rig": sp.base.name, "free": list(sp.free),
             "bounds": {k: list(v) for k, v in sp.bounds.items()},
-            "conditions": dataclasses.asdict(cond), "grid_points": res.grid_points,
+            "conditions": conditions_dict(cond), "grid_points": res.grid_points,
             "designs": [c.as_dict(sp) for c in (res.paper, res.grid_best, res.optimum)],
             "starts": [c.as_dict(sp) for c in res.starts],
-            "not_modelled": ["calibration share and the §4.4 compensation",
-                             "saturation and the exposure range", "glossy materials"]}
+            "not_modelled": (["the calibration's share (no covariance given)"]
+                             if cond.calibration is None else [])
+            + ([] if cond.compensate else ["the §4.4 compensation"])
+            + ["saturation and the exposure range", "glossy materials"]}
+
+
+def conditions_dict(cond: Conditions) -> dict:
+    """The conditions as JSON-ready values (a calibration covariance by its source and size)."""
+    out = {f.name: getattr(cond, f.name) for f in dataclasses.fields(cond)}
+    cal = cond.calibration
+    out["calibration"] = None if cal is None else {
+        "source": cal.source, "parameters": list(cal.names),
+        "sigma": [float(v) for v in np.sqrt(np.clip(np.diag(cal.matrix), 0.0, None))]}
+    out["diameters_mm"] = list(cond.diameters_mm)
+    return out
 
 
 def report_text(res: OptimizeResult) -> str:
@@ -277,6 +298,9 @@ def report_text(res: OptimizeResult) -> str:
         row(name, "{:.4g}", lambda c, i=i: c.x[i])
     row("U(k=2) radius, model (µm)", "{:.3f}", lambda c: c.U_um)
     row("σ radius, model (µm)", "{:.3f}", lambda c: c.sigma_R_um)
+    row("  share: image noise (µm)", "{:.3f}", lambda c: c.sigma_R_noise_um)
+    row("  share: §4.4 compensation (µm)", "{:.3f}", lambda c: c.sigma_R_comp_um)
+    row("  share: calibration (µm)", "{:.3f}", lambda c: c.sigma_R_cal_um)
     row("σ per point, rms (µm)", "{:.2f}", lambda c: c.point_rms_um)
     row("coverage, smooth (°)", "{:.1f}", lambda c: c.coverage_deg)
     row("penalty (µm)", "{:.3g}", lambda c: c.penalty_um)
@@ -287,6 +311,12 @@ def report_text(res: OptimizeResult) -> str:
             lambda c, key=key: float("nan") if c.hard is None else c.hard[key])
     row("model evaluations", "{:d}", lambda c: int(c.evaluations))
     row("seconds", "{:.1f}", lambda c: c.seconds)
-    lines += ["", "U is the model's: speckle, sensor noise and pixel locking through the circle "
-              "fit; the calibration's share is not in it (docs/design.md)."]
+    c = res.conditions
+    comp = (f"the §4.4 compensation's noise (Ø{c.compensation_diameter_mm:g} mm reference, "
+            f"{c.compensation_shots} shot{'s' if c.compensation_shots > 1 else ''})"
+            if c.compensate else "no §4.4 compensation")
+    cal = (f"the calibration's share ({c.calibration.source or 'given covariance'})"
+           if c.calibration is not None else "no calibration share (a perfect calibration)")
+    lines += ["", f"U is the model's: speckle, sensor noise and pixel locking through the circle "
+              f"fit, {comp}, {cal} (docs/design.md)."]
     return "\n".join(lines)
