@@ -197,8 +197,8 @@ def add_design_parser(sub) -> None:
     q.add_argument("--x", required=True, help=f"parameter on x ({names})")
     q.add_argument("--y", required=True, help="parameter on y")
     q.add_argument("--n", type=int, default=100, help="grid points per axis")
-    q.add_argument("--quantity", default="U_um", help="U_um, point_rms_um, coverage_deg, "
-                   "objective")
+    q.add_argument("--quantity", default="U_um", help="U_um, sigma_R_noise_um, "
+                   "sigma_R_comp_um, sigma_R_cal_um, point_rms_um, coverage_deg, objective")
     q.add_argument("--out", default="design-map.png")
     common(q)
     q.set_defaults(func=cmd_design_map)

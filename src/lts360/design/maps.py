@@ -11,6 +11,9 @@ __all__ = ["design_map", "plot_map", "QUANTITIES"]
 
 #: What a map can show: key of :func:`lts360.design.model.evaluate_batch` → label.
 QUANTITIES = {"U_um": "U(k=2) of the radius, worst case (µm)",
+              "sigma_R_noise_um": "σ of the radius from the image's noise, worst case (µm)",
+              "sigma_R_comp_um": "σ of the radius from the §4.4 compensation, worst case (µm)",
+              "sigma_R_cal_um": "σ of the radius from the calibration, worst case (µm)",
               "point_rms_um": "per-point σ_r, rms, worst case (µm)",
               "coverage_deg": "single-view coverage, smooth, worst case (°)",
               "objective": "objective: U + penalties (µm)"}
@@ -24,7 +27,7 @@ def design_map(space: DesignSpace, x_name: str, y_name: str, cond: Conditions, *
     -------
     dict
         ``x``, ``y`` : (n,) axes; every quantity of :data:`QUANTITIES` as (n, n) (rows: y);
-        ``U_um`` and ``point_rms_um`` are the largest over the cases, ``coverage_deg`` the
+        ``U_um``, the σ shares and ``point_rms_um`` are the largest over the cases, ``coverage_deg`` the
         smallest.
     """
     ix, iy = space.free.index(x_name), space.free.index(y_name)
@@ -37,6 +40,8 @@ def design_map(space: DesignSpace, x_name: str, y_name: str, cond: Conditions, *
     out = {"x": xs, "y": ys, "x_name": x_name, "y_name": y_name,
            "U_um": b["U_um"].max(axis=1).reshape(n, n),
            "point_rms_um": b["point_rms_um"].max(axis=1).reshape(n, n),
+           **{k: b[k].max(axis=1).reshape(n, n)
+              for k in ("sigma_R_noise_um", "sigma_R_comp_um", "sigma_R_cal_um")},
            "coverage_deg": b["coverage_deg"].min(axis=1).reshape(n, n),
            "objective": b["objective"].reshape(n, n)}
     return out
