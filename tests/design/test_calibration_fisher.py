@@ -436,3 +436,23 @@ def test_drjit_ops_agree_with_numpy(rig_plan):
                                [Float64(v) for v in INTR], nc)
     got = np.array([[np.asarray(v)[0] for v in row] for row in got])
     np.testing.assert_allclose(got, want, rtol=1e-10)
+
+
+def test_plan_covariance_of_the_paper_rig_matches_the_demo_calibration():
+    """The demo's calibration (paper rig, lts360 calibrate's plan, 2026-12-03) reported these
+    least-squares σ's; the prediction at the measured noise levels is within 10 %.  The laser
+    plane's σ's are the prediction's own golden numbers (the calibration's least squares
+    treat the line points as independent, which they are not)."""
+    from lts360.design.calibration import plan_covariance
+    from lts360.scenes.rig_io import load_rig
+
+    c = plan_covariance(load_rig("paper"))
+    sd = dict(zip(c.names, np.sqrt(np.diag(c.matrix))))
+    demo = {"camera.fx": 0.194, "camera.fy": 0.171, "camera.cx": 0.128, "camera.cy": 0.119,
+            "camera.k1": 3.64e-4, "left.a": 18.3e-6, "left.b": 13.5e-6, "left.delta": 3.35e-3,
+            "right.a": 18.0e-6, "right.b": 13.0e-6, "right.delta": 3.06e-3}
+    for k, v in demo.items():
+        assert sd[k] == pytest.approx(v, rel=0.10), k
+    assert sd["laser.a"] == pytest.approx(3.5e-4, rel=0.05)
+    assert sd["laser.delta"] == pytest.approx(0.0415, rel=0.05)
+    assert sd["camera.p1"] == 0.0 and sd["camera.k3"] == 0.0

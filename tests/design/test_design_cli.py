@@ -77,6 +77,13 @@ def test_optimize_with_a_calibration_file(tmp_path):
     opt = rep["designs"][2]
     assert opt["sigma_R_calibration_um"] > 0.1
     assert rep["conditions"]["calibration"]["source"] == str(cal)
+    out2 = tmp_path / "opt-plan"
+    assert main(["design", "optimize", "--out", str(out2), "--free", "alpha_deg",
+                 "--starts", "1", "--grid-per-axis", "3", "--n-theta", "90",
+                 "--diameters-mm", "20", "--calibration", "plan"]) == 0
+    rep2 = json.loads((out2 / "report.json").read_text())
+    assert rep2["conditions"]["calibration"]["source"].startswith("plan of paper")
+    assert rep2["designs"][2]["sigma_R_calibration_um"] > 0.1
     assert opt["sigma_R_um"] == pytest.approx(
         (opt["sigma_R_noise_um"] ** 2 + opt["sigma_R_compensation_um"] ** 2
          + opt["sigma_R_calibration_um"] ** 2) ** 0.5, rel=1e-6)

@@ -49,20 +49,28 @@ def _space_and_conditions(args):
                       compensate=not args.no_compensation,
                       compensation_diameter_mm=args.compensation_diameter_mm,
                       compensation_shots=args.compensation_shots,
-                      calibration=_calibration(args.calibration))
+                      calibration=_calibration(args.calibration, space.base))
     return space, cond
 
 
-def _calibration(source):
-    """``--calibration``: none, or a calibration JSON whose covariance the model propagates."""
+def _calibration(source, base):
+    """``--calibration``: none, ``plan`` (the covariance predicted for ``lts360 calibrate``'s
+    plan of the base rig), or a calibration JSON whose covariance the model propagates."""
     from lts360.design.shares import CalibrationCovariance
 
     if source is None or source == "none":
         return None
+    if source == "plan":
+        from lts360.design.calibration import plan_covariance
+
+        try:
+            return plan_covariance(base)
+        except ValueError as exc:
+            raise UsageError(f"--calibration plan: {exc}") from None
     path = Path(source)
     if not path.is_file():
         raise UsageError(f"--calibration: no file {source!r} (a calibration JSON written by "
-                         "lts360 calibrate, or 'none')")
+                         "lts360 calibrate, 'plan' or 'none')")
     try:
         return CalibrationCovariance.from_file(path)
     except (ValueError, json.JSONDecodeError) as exc:
@@ -176,9 +184,10 @@ def add_design_parser(sub) -> None:
                        help="the compensation's reference, centred (default the plug gauge)")
         q.add_argument("--compensation-shots", type=int, default=1,
                        help="reference images the compensation is fitted to")
-        q.add_argument("--calibration", default=None, metavar="FILE|none",
-                       help="add the share of a calibration with this file's covariance "
-                       "(lts360 calibrate's calibration.json); default none")
+        q.add_argument("--calibration", default=None, metavar="plan|FILE|none",
+                       help="add the calibration's share: 'plan' (the covariance predicted "
+                       "for lts360 calibrate's board plan of the base rig) or a calibration "
+                       "file's (lts360 calibrate's calibration.json); default none")
 
     q = ds.add_parser("optimize", help="multi-start L-BFGS-B on the model, seeded by a grid "
                       "of it; writes rig.toml and a report")

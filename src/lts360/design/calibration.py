@@ -55,7 +55,8 @@ __all__ = ["NumpyOps", "NUMPY_OPS", "drjit_ops", "cholesky", "spd_solve", "spd_i
            "board_shift_jacobian", "line_noise_gain", "camera_information",
            "mirror_information", "board_pose_information", "laser_plane_parts",
            "LaserLineSamples", "laser_line_samples", "CalibrationPrediction",
-           "predict_calibration_covariance", "INTRINSIC_NAMES"]
+           "predict_calibration_covariance", "INTRINSIC_NAMES", "plan_covariance",
+           "PLAN_SIGMA_CORNER_PX", "PLAN_SIGMA_TARGET_PX", "PLAN_SIGMA_LINE_PX"]
 
 #: The intrinsics the camera stage estimates, in the order of its covariance.
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2")
@@ -786,3 +787,50 @@ def predict_calibration_covariance(rig, shots, *, sigma_corner_px: float,
                                      "line_fitted_mm2_per_px2":
                                          float(parts["ms_line_fitted"][0]),
                                      "pose_mm2_per_px2": float(parts["ms_pose"][0])}})
+
+
+# --------------------------------------------------------------------------- the plan's covariance
+
+#: Noise levels of the rendered calibration (the demo's ``lts360 calibrate``, paper rig, 64 spp,
+#: measured 2026-12-03): the camera board's corners, σ per coordinate = OpenCV's per-corner
+#: RMS 0.045 px / √2; the small mirror/laser board's corners (its mirror fits' per-coordinate
+#: RMS); the line centres, per detected centre, the σ at which this model's laser-fit residual
+#: (each pose's points moved onto their straight line, as the calibration fits them) equals
+#: the demo's 5.56 µm.
+PLAN_SIGMA_CORNER_PX = 0.0317
+PLAN_SIGMA_TARGET_PX = 0.0089
+PLAN_SIGMA_LINE_PX = 0.54
+
+
+def plan_covariance(rig, *, n_camera: int = 30, n_mirror: int = 6, n_laser: int = 6,
+                    seed: int = 0, sigma_corner_px: float = PLAN_SIGMA_CORNER_PX,
+                    sigma_target_px: float = PLAN_SIGMA_TARGET_PX,
+                    sigma_line_px: float = PLAN_SIGMA_LINE_PX):
+    """The covariance ``lts360 calibrate``'s plan for ``rig`` is predicted to give, as a
+    :class:`lts360.design.shares.CalibrationCovariance` the design model propagates.
+
+    The plan is :func:`lts360.scenes.calib_plan.plan_calibration` with ``lts360 calibrate``'s
+    defaults (30 camera shots, 6 per mirror, 6 laser shots, seed 0, the default boards); the
+    mirrors' covariance is carried into the laser boards' poses.  The prediction assumes
+    independent corner errors: the calibration's jackknife, which sees errors shared by a
+    board, is 1–7× larger on the demo (STUDIES.md).
+
+    Raises
+    ------
+    ValueError
+        The plan cannot be made for this rig, or a stage has too few shots.
+    """
+    from lts360.design.shares import CalibrationCovariance
+    from lts360.scenes.calib_plan import plan_calibration
+
+    shots = plan_calibration(rig, n_camera=n_camera, n_mirror=n_mirror, n_laser=n_laser,
+                             seed=seed)
+    pred = predict_calibration_covariance(rig, shots, sigma_corner_px=sigma_corner_px,
+                                          sigma_target_px=sigma_target_px,
+                                          sigma_line_px=sigma_line_px, mirror_into_laser=True)
+    planes = {k: n for k, (n, _) in pred.planes_cam.items()}
+    return CalibrationCovariance.from_uncertainty(
+        pred.to_uncertainty(), planes,
+        source=f"plan of {rig.name} ({n_camera} camera, {n_mirror} per mirror, {n_laser} "
+               f"laser shots; σ corner {sigma_corner_px:g}/{sigma_target_px:g} px, line "
+               f"{sigma_line_px:g} px)")
