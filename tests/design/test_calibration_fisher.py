@@ -456,3 +456,63 @@ def test_plan_covariance_of_the_paper_rig_matches_the_demo_calibration():
     assert sd["laser.a"] == pytest.approx(3.5e-4, rel=0.05)
     assert sd["laser.delta"] == pytest.approx(0.0415, rel=0.05)
     assert sd["camera.p1"] == 0.0 and sd["camera.k3"] == 0.0
+
+
+def _moved_plan(space, x, base_shots):
+    """The base plan for the design ``x``: camera boards moved with the camera, mirror and
+    laser boards where they were in the world (the model's rule)."""
+    import dataclasses
+
+    base_cam = space.base.camera
+    cam = space.rig(x).camera
+
+    def T_world_cam(c):
+        T = np.eye(4)
+        T[:3, :3] = c.R.T
+        T[:3, 3] = -c.R.T @ c.t_mm
+        return T
+
+    move = T_world_cam(cam) @ np.linalg.inv(T_world_cam(base_cam))
+    out = []
+    for s in base_shots:
+        if s.kind == "camera":
+            s = dataclasses.replace(s, board=dataclasses.replace(
+                s.board, T_world_board=move @ s.board.T_world_board))
+        out.append(s)
+    return out
+
+
+@pytest.mark.slow  # ~60 s: records the model's per-design plan covariance
+def test_model_plan_covariance_equals_the_numpy_prediction_at_other_designs():
+    """The model's Dr.Jit plan covariance against predict_calibration_covariance (numpy) on
+    the design's rig with the plan moved by the model's rule.  The camera and mirror blocks
+    agree exactly; the laser plane within 25 % (the model keeps the base rig's count of line
+    centres per sample, the numpy front end recounts them for the new camera)."""
+    from lts360.design.calibration import CalibrationPlan, predict_calibration_covariance
+    from lts360.design.model import plan_covariance_at
+    from lts360.design.params import DesignSpace
+    from lts360.scenes.calib_plan import plan_calibration
+
+    space = DesignSpace.create("paper")
+    plan = CalibrationPlan.from_rig(space.base)
+    shots = plan_calibration(space.base, n_camera=30, n_mirror=6, n_laser=6, seed=0)
+    x0 = space.base_x()
+    x1 = x0.copy()
+    for name, v in (("alpha_deg", 46.0), ("camera_distance_mm", 200.0),
+                    ("focal_length_mm", 9.5), ("beta_deg", 95.0)):
+        x1[space.free.index(name)] = v
+    for x in (x0, x1):
+        got = plan_covariance_at(space, plan, x)
+        pred = predict_calibration_covariance(
+            space.rig(x), _moved_plan(space, x, shots), sigma_corner_px=plan.sigma_corner_px,
+            sigma_target_px=plan.sigma_target_px, sigma_line_px=plan.sigma_line_px,
+            mirror_into_laser=True)
+        want = np.zeros_like(got)
+        want[:6, :6] = pred.camera_cov
+        want[9:12, 9:12] = pred.mirror_cov["left"]
+        want[12:15, 12:15] = pred.mirror_cov["right"]
+        want[15:, 15:] = pred.laser_cov
+        sd_got, sd_want = np.sqrt(np.diag(got)), np.sqrt(np.diag(want))
+        np.testing.assert_allclose(sd_got[:15], sd_want[:15], rtol=1e-6, atol=1e-15)
+        same = np.allclose(x, x0)
+        np.testing.assert_allclose(sd_got[15:], sd_want[15:], rtol=1e-9 if same else 0.25)

@@ -293,3 +293,28 @@ def test_covariance_from_a_calibration_file(tmp_path):
         CalibrationCovariance.from_file(tmp_path / "bare.json")
     with pytest.raises(ValueError, match="3×3"):
         CalibrationCovariance.from_uncertainty({"laser_plane": {"cov_abd": [[1.0]]}})
+
+
+@pytest.mark.slow  # ~60 s: records the model with the per-design plan covariance
+def test_gradient_with_the_plan_covariance_matches_central_differences():
+    """The calibration's covariance predicted per design from the plan: the objective's
+    gradient, every parameter at three designs, ≤ 1e-3 relative."""
+    from lts360.design.calibration import CalibrationPlan
+
+    space = DesignSpace.create("paper")
+    cond = M.Conditions(diameters_mm=(12.0, 24.0), n_theta=96, margin_px=20.0,
+                        calibration=CalibrationPlan.from_rig(space.base))
+    x0 = space.base_x()
+    designs = [x0, space.from_scaled(np.linspace(0.35, 0.65, len(x0))),
+               space.from_scaled(np.roll(np.linspace(0.35, 0.65, len(x0)), 5))]
+    for x in designs:
+        e = M.evaluate(space, x, cond)
+        assert e.sigma_R_cal_um.max() > 0.1
+        for i, name in enumerate(space.free):
+            h = 1e-5 * (space.hi[i] - space.lo[i])
+            xp, xm = x.copy(), x.copy()
+            xp[i] += h
+            xm[i] -= h
+            fd = (M.evaluate(space, xp, cond).objective
+                  - M.evaluate(space, xm, cond).objective) / (2 * h)
+            assert abs(e.gradient[i] - fd) <= 1e-3 * max(abs(fd), 1e-4), (name, e.gradient[i], fd)

@@ -61,10 +61,10 @@ def _calibration(source, base):
     if source is None or source == "none":
         return None
     if source == "plan":
-        from lts360.design.calibration import plan_covariance
+        from lts360.design.calibration import CalibrationPlan
 
         try:
-            return plan_covariance(base)
+            return CalibrationPlan.from_rig(base)
         except ValueError as exc:
             raise UsageError(f"--calibration plan: {exc}") from None
     path = Path(source)
@@ -186,7 +186,8 @@ def add_design_parser(sub) -> None:
                        help="reference images the compensation is fitted to")
         q.add_argument("--calibration", default=None, metavar="plan|FILE|none",
                        help="add the calibration's share: 'plan' (the covariance predicted "
-                       "for lts360 calibrate's board plan of the base rig) or a calibration "
+                       "for every design from lts360 calibrate's board plan of the base rig; "
+                       "the first evaluation records the model, ~1 min) or a calibration "
                        "file's (lts360 calibrate's calibration.json); default none")
 
     q = ds.add_parser("optimize", help="multi-start L-BFGS-B on the model, seeded by a grid "

@@ -56,7 +56,8 @@ __all__ = ["NumpyOps", "NUMPY_OPS", "drjit_ops", "cholesky", "spd_solve", "spd_i
            "mirror_information", "board_pose_information", "laser_plane_parts",
            "LaserLineSamples", "laser_line_samples", "CalibrationPrediction",
            "predict_calibration_covariance", "INTRINSIC_NAMES", "plan_covariance",
-           "PLAN_SIGMA_CORNER_PX", "PLAN_SIGMA_TARGET_PX", "PLAN_SIGMA_LINE_PX"]
+           "PLAN_SIGMA_CORNER_PX", "PLAN_SIGMA_TARGET_PX", "PLAN_SIGMA_LINE_PX",
+           "CalibrationPlan"]
 
 #: The intrinsics the camera stage estimates, in the order of its covariance.
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2")
@@ -90,6 +91,11 @@ class NumpyOps:
                              f"got shape {x.shape}")
         return x.reshape(-1, n).sum(axis=1)
 
+    @staticmethod
+    def gather(x, index):
+        """``x[index]``."""
+        return np.asarray(x, dtype=float)[np.asarray(index)]
+
 
 NUMPY_OPS = NumpyOps()
 
@@ -107,6 +113,10 @@ def drjit_ops():
         @staticmethod
         def block_sum(x, n: int):
             return dr.block_sum(x, n)
+
+        @staticmethod
+        def gather(x, index):
+            return dr.gather(type(x), x, index)
 
     return DrJitOps()
 
@@ -333,11 +343,12 @@ def line_noise_gain(p_mm: list, b1: list, b2: list, n_laser: list, intrinsics) -
 
 # --------------------------------------------------------------------------- information
 
-def _schur_over_shots(ops, A: list, B: list, C: list) -> list:
+def _schur_over_shots(ops, A: list, B: list, C: list, shots: int | None = None) -> list:
     """``Σ_i (A_i − B_i C_i⁻¹ B_iᵀ)`` for per-shot arrays: the parameters' information with
-    each shot's pose eliminated."""
+    each shot's pose eliminated (summed over blocks of ``shots`` shots: one block per design;
+    default all)."""
     S = _mat_sub(A, mat_mul(B, spd_solve(ops, C, mat_transpose(B))))
-    m = _array_len(S[0][0])
+    m = shots or _array_len(S[0][0])
     return _block_sum_mat(ops, S, m)
 
 
@@ -345,7 +356,8 @@ def _array_len(x) -> int:
     return len(x) if hasattr(x, "__len__") else 1
 
 
-def camera_information(ops, X_cam_mm: list, intrinsics, n_corners: int) -> list:
+def camera_information(ops, X_cam_mm: list, intrinsics, n_corners: int,
+                       shots: int | None = None) -> list:
     """Fisher information (6 × 6, per unit σ_c², px⁻²) of ``fx fy cx cy k1 k2``.
 
     Parameters
@@ -358,7 +370,7 @@ def camera_information(ops, X_cam_mm: list, intrinsics, n_corners: int) -> list:
     A = _block_sum_mat(ops, gram(Ji, Ji), n_corners)
     B = _block_sum_mat(ops, gram(Ji, Jp), n_corners)
     C = _block_sum_mat(ops, gram(Jp, Jp), n_corners)
-    return _schur_over_shots(ops, A, B, C)
+    return _schur_over_shots(ops, A, B, C, shots)
 
 
 def _real_virtual_rows(X_cam_mm, intrinsics, n, d_mm, e1, e2):
@@ -398,11 +410,11 @@ def board_pose_information(ops, X_cam_mm: list, intrinsics, n: list, d_mm, e1: l
 
 
 def mirror_information(ops, X_cam_mm: list, intrinsics, n: list, d_mm, e1: list, e2: list,
-                       n_corners: int) -> list:
+                       n_corners: int, shots: int | None = None) -> list:
     """Fisher information (3 × 3, unit σ_c²) of a mirror's ``(a, b, δ)`` from its shots'
     real and virtual corners, the board poses eliminated (K fixed)."""
     C, B, D = board_pose_information(ops, X_cam_mm, intrinsics, n, d_mm, e1, e2, n_corners)
-    return _schur_over_shots(ops, D, mat_transpose(B), C)
+    return _schur_over_shots(ops, D, mat_transpose(B), C, shots)
 
 
 def _along(p_mm: list, n_board: list, n_laser: list):
@@ -416,7 +428,7 @@ def _along(p_mm: list, n_board: list, n_laser: list):
 
 def laser_plane_parts(ops, line: dict, pose_C: list, pose_B: list, n_laser: list, d_laser_mm,
                       e1: list, e2: list, intrinsics, n_line: int,
-                      mirror_terms: list | None = None) -> dict:
+                      mirror_terms: list | None = None, designs: int = 1) -> dict:
     """The laser-plane fit's covariance and mean-square residual, split by source.
 
     Parameters
@@ -444,20 +456,21 @@ def laser_plane_parts(ops, line: dict, pose_C: list, pose_B: list, n_laser: list
         offset and tilt); ``n_points`` (Σ w).
     """
     p, w = line["p"], line["w"]
+    n_all = _array_len(w) // designs  # line samples per design
     G = [plane_residual_jacobian(p, e1, e2)]  # 1 × 3
     a = [board_shift_jacobian(p, line["n_board"], line["d_board"], d_laser_mm)]  # 1 × 6
     g = line_noise_gain(p, line["b1"], line["b2"], n_laser, intrinsics)
     g2 = g[0] * g[0] + g[1] * g[1]
     wG = [[w * c for c in G[0]]]
-    M = _block_sum_mat(ops, gram(wG, G), _array_len(w))
+    M = _block_sum_mat(ops, gram(wG, G), n_all)
     Minv = spd_inverse(ops, M)
-    Q_line = _block_sum_mat(ops, gram([[c * g2 for c in wG[0]]], G), _array_len(w))
+    Q_line = _block_sum_mat(ops, gram([[c * g2 for c in wG[0]]], G), n_all)
     h = _block_sum_mat(ops, gram(wG, a), n_line)  # per shot, 3 × 6
     Cinv_hT = spd_solve(ops, pose_C, mat_transpose(h))  # 6 × 3
-    m_shots = _array_len(h[0][0])
+    m_shots = _array_len(h[0][0]) // designs  # shots per design
     Q_pose = _block_sum_mat(ops, mat_mul(h, Cinv_hT), m_shots)
     Aaa = _block_sum_mat(ops, gram([[w * c for c in a[0]]], a), n_line)  # per shot Σ w a aᵀ
-    n_points = ops.block_sum(w, _array_len(w))
+    n_points = ops.block_sum(w, n_all)
     # The calibration moves each pose's centres onto a straight line before the plane fit:
     # the line noise left in its residuals is the part along (1, s) per pose (s along the
     # line; G and the pose shifts are affine in s, so the plane itself does not change).
@@ -465,11 +478,11 @@ def laser_plane_parts(ops, line: dict, pose_C: list, pose_B: list, n_laser: list
     phi = [[w * 0.0 + 1.0, s_along]]
     Pw = _block_sum_mat(ops, gram([[w * f for f in phi[0]]], phi), n_line)
     Pg = _block_sum_mat(ops, gram([[w * g2 * f for f in phi[0]]], phi), n_line)
-    tr_fit = ops.block_sum(_trace_mul(spd_inverse(ops, Pw), Pg), _array_len(Pw[0][0]))
+    tr_fit = ops.block_sum(_trace_mul(spd_inverse(ops, Pw), Pg), m_shots)
     out = {"M": M, "n_points": n_points,
            "cov_line": mat_mul(mat_mul(Minv, Q_line), Minv),
            "cov_pose": mat_mul(mat_mul(Minv, Q_pose), Minv),
-           "ms_line": (ops.block_sum(w * g2, _array_len(w)) - _trace_mul(Minv, Q_line))
+           "ms_line": (ops.block_sum(w * g2, n_all) - _trace_mul(Minv, Q_line))
            / n_points,
            "ms_line_fitted": (tr_fit - _trace_mul(Minv, Q_line)) / n_points,
            "ms_pose": (ops.block_sum(_trace_mul(spd_inverse(ops, pose_C), Aaa), m_shots)
@@ -480,10 +493,13 @@ def laser_plane_parts(ops, line: dict, pose_C: list, pose_B: list, n_laser: list
         F = [[-f for f in row] for row in mat_mul(h, CinvB)]
         BtCAC = gram(CinvB, mat_mul(Aaa, CinvB))  # per shot: (C⁻¹B)ᵀ Aaa (C⁻¹B)
         Q_m, tr_m = None, None
-        for mask, cov in mirror_terms:
+        for term in mirror_terms:
+            # (mask, cov) or (mask, cov per design, cov per shot) when designs > 1
+            mask, cov = term[0], term[1]
+            cov_shot = term[2] if len(term) > 2 else cov
             Fm = _block_sum_mat(ops, [[f * mask for f in row] for row in F], m_shots)
             q = mat_mul(mat_mul(Fm, cov), mat_transpose(Fm))
-            t = ops.block_sum(_trace_mul([[v * mask for v in row] for row in BtCAC], cov),
+            t = ops.block_sum(_trace_mul([[v * mask for v in row] for row in BtCAC], cov_shot),
                               m_shots)
             Q_m = q if Q_m is None else _mat_add(Q_m, q)
             tr_m = t if tr_m is None else tr_m + t
@@ -834,3 +850,233 @@ def plan_covariance(rig, *, n_camera: int = 30, n_mirror: int = 6, n_laser: int 
         source=f"plan of {rig.name} ({n_camera} camera, {n_mirror} per mirror, {n_laser} "
                f"laser shots; σ corner {sigma_corner_px:g}/{sigma_target_px:g} px, line "
                f"{sigma_line_px:g} px)")
+
+
+# --------------------------------------------------------------------------- in the design model
+
+@dataclass(frozen=True, eq=False)
+class CalibrationPlan:
+    """A calibration plan the design model re-predicts for every design (with gradients).
+
+    The plan is made once, for the base rig (:func:`plan_calibration` with ``lts360
+    calibrate``'s defaults).  As the design changes, the camera boards stay where they were
+    *relative to the camera* (the same image coverage and tilts), and the mirror and laser
+    boards stay where they were *in the world* (in the measurement volume); every
+    covariance (intrinsics, mirrors, laser plane, with the mirrors' carried into the laser
+    boards' poses) is recomputed from the design's camera, mirrors and laser.  The laser
+    line's sample points on each board stay in the world (the sheet is the plane z = 0 of
+    every design) with the base rig's weights.  Compared by identity (one recording of the
+    model per plan).
+    """
+
+    names: tuple
+    mirror_names: tuple
+    cam_X: np.ndarray        # (S_c n_c, 3) camera frame
+    n_cam_corners: int
+    mirror_X: tuple          # per mirror (S_m n, 3) world
+    mirror_corners: tuple    # per mirror: corners per shot
+    laser_X: np.ndarray      # (S_l n_l, 3) world
+    n_laser_corners: int
+    laser_mirror: np.ndarray  # (S_l,) index into mirror_names
+    line_p: np.ndarray       # (S_l n_line, 3) world
+    line_w: np.ndarray       # (S_l n_line,)
+    line_nb: np.ndarray      # (S_l, 3) board normal, world
+    line_db: np.ndarray      # (S_l,) board offset, world
+    line_b1: np.ndarray      # (S_l, 3)
+    line_b2: np.ndarray      # (S_l, 3)
+    n_line: int
+    sigma_corner_px: float
+    sigma_target_px: float
+    sigma_line_px: float
+    source: str = ""
+
+    @classmethod
+    def from_rig(cls, rig, *, n_camera: int = 30, n_mirror: int = 6, n_laser: int = 6,
+                 seed: int = 0, sigma_corner_px: float = PLAN_SIGMA_CORNER_PX,
+                 sigma_target_px: float = PLAN_SIGMA_TARGET_PX,
+                 sigma_line_px: float = PLAN_SIGMA_LINE_PX, n_line: int = 32
+                 ) -> "CalibrationPlan":
+        """The plan of ``rig`` (raises ValueError as :func:`predict_calibration_covariance`)."""
+        from lts360.scenes.calib_plan import plan_calibration
+
+        shots = plan_calibration(rig, n_camera=n_camera, n_mirror=n_mirror, n_laser=n_laser,
+                                 seed=seed)
+        cam = rig.camera
+        R, t = np.asarray(cam.R, float), np.asarray(cam.t_mm, float)
+        K = np.asarray(cam.K, float)
+        mnames = tuple(m.name for m in rig.mirrors)
+        cam_shots = [s for s in shots if s.kind == "camera"]
+        if len(cam_shots) < 3:
+            raise ValueError(f"calibration plan: {len(cam_shots)} camera shots, need 3")
+        cam_X = np.concatenate([s.board.corners_world_mm() @ R.T + t for s in cam_shots])
+        mX, mC = [], []
+        for name in mnames:
+            sel = [s for s in shots if s.mirror == name and s.kind in ("mirror", "laser")]
+            if not sel:
+                raise ValueError(f"calibration plan: no shot for mirror {name!r}")
+            mX.append(np.concatenate([s.board.corners_world_mm() for s in sel]))
+            mC.append(len(sel[0].board.corners_world_mm()))
+        lshots = [s for s in shots if s.kind == "laser"]
+        if len(lshots) < 2 or any(s.mirror not in mnames for s in lshots):
+            raise ValueError("calibration plan: needs ≥ 2 laser shots, each seen in a mirror")
+        nL, dL = _plane_cam(*rig.laser.plane, R, t)
+        P, W, NB, DB, B1, B2 = [], [], [], [], [], []
+        for s in lshots:
+            T = s.board.T_world_board
+            Rb, tb = R @ T[:3, :3], R @ T[:3, 3] + t
+            got = laser_line_samples(Rb, tb, s.board.pattern_size, s.board.square_mm, nL, dL,
+                                     K, n_line=n_line)
+            if got is None:
+                raise ValueError(f"calibration plan: the laser sheet misses {s.name}")
+            P.append((got[0] - t) @ R)  # back to the world
+            W.append(np.full(n_line, got[1]))
+            NB.append(T[:3, 2])
+            DB.append(float(T[:3, 2] @ T[:3, 3]))
+            B1.append(T[:3, 0])
+            B2.append(T[:3, 1])
+        names = tuple([f"camera.{n}" for n in CAMERA_NAMES]
+                      + [f"{m}.{p}" for m in sorted(mnames) for p in ("a", "b", "delta")]
+                      + [f"laser.{p}" for p in ("a", "b", "delta")])
+        return cls(names=names, mirror_names=mnames, cam_X=cam_X,
+                   n_cam_corners=len(cam_shots[0].board.corners_world_mm()),
+                   mirror_X=tuple(mX), mirror_corners=tuple(mC),
+                   laser_X=np.concatenate([s.board.corners_world_mm() for s in lshots]),
+                   n_laser_corners=len(lshots[0].board.corners_world_mm()),
+                   laser_mirror=np.array([mnames.index(s.mirror) for s in lshots]),
+                   line_p=np.concatenate(P), line_w=np.concatenate(W), line_nb=np.array(NB),
+                   line_db=np.array(DB), line_b1=np.array(B1), line_b2=np.array(B2),
+                   n_line=n_line, sigma_corner_px=float(sigma_corner_px),
+                   sigma_target_px=float(sigma_target_px), sigma_line_px=float(sigma_line_px),
+                   source=f"plan of {rig.name} per design ({n_camera} camera, {n_mirror} per "
+                          f"mirror, {n_laser} laser shots; σ corner {sigma_corner_px:g}/"
+                          f"{sigma_target_px:g} px, line {sigma_line_px:g} px)")
+
+    def arrays(self, F, U, designs: int) -> dict:
+        """The plan's constants as Dr.Jit arrays for ``designs`` designs (tiled), with the
+        design index of every element (made outside the model's recorded function)."""
+        def cols(a, key, out):
+            a = np.tile(np.asarray(a, float), (designs, 1)) if np.ndim(a) == 2 else \
+                np.tile(np.asarray(a, float), designs)
+            if a.ndim == 2:
+                for j in range(a.shape[1]):
+                    out[f"{key}{j}"] = F(a[:, j].copy())
+            else:
+                out[key] = F(a)
+            return out
+
+        def di(n):
+            return U(np.repeat(np.arange(designs), n))
+
+        out: dict = {}
+        cols(self.cam_X, "camX", out)
+        out["camdi"] = di(len(self.cam_X))
+        for k, X in enumerate(self.mirror_X):
+            cols(X, f"m{k}X", out)
+            out[f"m{k}di"] = di(len(X))
+        cols(self.laser_X, "lX", out)
+        out["ldi"] = di(len(self.laser_X))
+        nl = self.n_laser_corners
+        for k in range(len(self.mirror_names)):
+            sel = (self.laser_mirror == k).astype(float)
+            cols(np.repeat(sel, nl), f"lmask{k}_c", out)
+            cols(sel, f"lmask{k}_s", out)
+        cols(self.line_p, "pX", out)
+        cols(self.line_w, "pw", out)
+        out["pdi"] = di(len(self.line_p))
+        for key, a in (("nb", self.line_nb), ("b1", self.line_b1), ("b2", self.line_b2)):
+            cols(np.repeat(a, self.n_line, axis=0), key, out)
+        cols(np.repeat(self.line_db, self.n_line), "db", out)
+        out["sdi"] = di(len(self.laser_mirror))  # per laser shot
+        out["one"] = di(1)  # per design
+        return out
+
+    def covariance(self, ops, A: dict, view, designs: int) -> list:
+        """The predicted covariance over :attr:`names` (lists of rows of per-design arrays;
+        ``None`` where it is zero by construction).
+
+        ``view(di)`` returns the design's camera and planes gathered at the design indices
+        ``di``: ``to_cam(X)``, ``rot(v)``, ``pos`` (3 arrays each), ``intr`` (fx, fy, cx,
+        cy, k1, k2) and ``mirrors`` (list of (n_world, d_world)).
+        """
+        sc, st, sl = self.sigma_corner_px, self.sigma_target_px, self.sigma_line_px
+
+        def x3(key):
+            return [A[f"{key}{j}"] for j in range(3)]
+
+        def dot(a, b):
+            return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+        def plane_cam(v, n_w, d_w):
+            n = v["rot"](n_w)
+            d = d_w - dot(n_w, v["pos"])
+            # tangent_basis: e1 = normalise(n × x̂), e2 = n × e1 (|n_x| < 0.9 here)
+            e1 = [0.0 * n[0], n[2], -n[1]]
+            norm = ops.sqrt(e1[1] * e1[1] + e1[2] * e1[2])
+            e1 = [e1[0], e1[1] / norm, e1[2] / norm]
+            e2 = [n[1] * e1[2] - n[2] * e1[1], n[2] * e1[0] - n[0] * e1[2],
+                  n[0] * e1[1] - n[1] * e1[0]]
+            return n, d, e1, e2
+
+        def scaled(M, s2):
+            return [[v * s2 for v in row] for row in M]
+
+        n_cam_shots = len(self.cam_X) // self.n_cam_corners
+        v = view(A["camdi"])
+        cam_info = camera_information(ops, x3("camX"), v["intr"], self.n_cam_corners,
+                                      shots=n_cam_shots)
+        cov_cam = scaled(spd_inverse(ops, cam_info), sc * sc)
+        cov_m = []
+        for k in range(len(self.mirror_names)):
+            v = view(A[f"m{k}di"])
+            n, d, e1, e2 = plane_cam(v, *v["mirrors"][k])
+            nc = self.mirror_corners[k]
+            info = mirror_information(ops, v["to_cam"](x3(f"m{k}X")), v["intr"], n, d, e1, e2,
+                                      nc, shots=len(self.mirror_X[k]) // nc)
+            cov_m.append(scaled(spd_inverse(ops, info), st * st))
+        # laser boards: each seen directly and in its mirror
+        v = view(A["ldi"])
+        planes = [plane_cam(v, *m) for m in v["mirrors"]]
+        masks = [A[f"lmask{k}_c"] for k in range(len(planes))]
+
+        def pick(i):
+            out = None
+            for mk, pl in zip(masks, planes):
+                val = pl[i]
+                term = [c * mk for c in val] if isinstance(val, list) else val * mk
+                out = term if out is None else (
+                    [a + b for a, b in zip(out, term)] if isinstance(term, list) else out + term)
+            return out
+
+        C, B, _ = board_pose_information(ops, v["to_cam"](x3("lX")), v["intr"], pick(0),
+                                         pick(1), pick(2), pick(3), self.n_laser_corners)
+        v = view(A["pdi"])
+        nL, dL, eL1, eL2 = plane_cam(v, [0.0, 0.0, 1.0], 0.0)
+        nb_w = x3("nb")
+        line = {"p": v["to_cam"](x3("pX")), "w": A["pw"], "n_board": v["rot"](nb_w),
+                "d_board": A["db"] - dot(nb_w, v["pos"]), "b1": v["rot"](x3("b1")),
+                "b2": v["rot"](x3("b2"))}
+        terms = []
+        for k in range(len(self.mirror_names)):
+            per_shot = [[ops.gather(c, A["sdi"]) for c in row] for row in cov_m[k]]
+            terms.append((A[f"lmask{k}_s"], cov_m[k], per_shot))
+        parts = laser_plane_parts(ops, line, C, B, nL, dL, eL1, eL2, v["intr"], self.n_line,
+                                  mirror_terms=terms, designs=designs)
+        cov_l = [[parts["cov_line"][i][j] * (sl * sl) + parts["cov_pose"][i][j] * (st * st)
+                  + parts["cov_mirror"][i][j] for j in range(3)] for i in range(3)]
+        # assemble over names
+        K = len(self.names)
+        out = [[None] * K for _ in range(K)]
+        for i in range(6):
+            for j in range(6):
+                out[i][j] = cov_cam[i][j]
+        order = sorted(range(len(self.mirror_names)), key=lambda k: self.mirror_names[k])
+        o = 9
+        for k in order:
+            for i in range(3):
+                for j in range(3):
+                    out[o + i][o + j] = cov_m[k][i][j]
+            o += 3
+        for i in range(3):
+            for j in range(3):
+                out[o + i][o + j] = cov_l[i][j]
+        return out

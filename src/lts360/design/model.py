@@ -47,10 +47,12 @@ import numpy as np
 
 from lts360.design.locking import LOCKING_COEFFS, SIGMA_MAX, SIGMA_MIN
 from lts360.design.params import PARAMETERS, DesignError, DesignSpace
+from lts360.design.calibration import CalibrationPlan, drjit_ops
 from lts360.design.shares import CalibrationCovariance, compensation_shares
 from lts360.scenes.coverage import mirror_sequences, view_name
 
 __all__ = ["Conditions", "Evaluation", "evaluate", "evaluate_batch", "pixel_speckle_contrast",
+           "plan_covariance_at",
            "SPECKLE_MODELS", "CORRELATION_PX"]
 
 #: ``"pixel"``: the simulator's speckle — a multiplicative pattern of pixel-integrated contrast
@@ -131,9 +133,10 @@ class Conditions:
     compensation_diameter_mm, compensation_shots : float, int
         The reference: a centred round section of this diameter (the plug gauge), imaged
         ``compensation_shots`` times and fitted jointly.
-    calibration : CalibrationCovariance or None
-        The calibration's covariance; its share of the radius is added (None: a perfectly
-        calibrated rig).
+    calibration : CalibrationCovariance, CalibrationPlan or None
+        The calibration's covariance (fixed), or a calibration plan whose covariance the
+        model predicts for every design (:class:`lts360.design.calibration.CalibrationPlan`);
+        its share of the radius is added (None: a perfectly calibrated rig).
     """
 
     diameters_mm: tuple = (20.0,)
@@ -185,9 +188,10 @@ class Conditions:
                 and 1 <= self.compensation_shots <= 100):
             raise DesignError("compensation_shots: must be an integer in [1, 100], got "
                               f"{self.compensation_shots!r}")
-        if self.calibration is not None and not isinstance(self.calibration,
-                                                           CalibrationCovariance):
-            raise DesignError("calibration: must be a CalibrationCovariance or None")
+        if self.calibration is not None and not isinstance(
+                self.calibration, (CalibrationCovariance, CalibrationPlan)):
+            raise DesignError("calibration: must be a CalibrationCovariance, a CalibrationPlan "
+                              "or None")
 
     def cases(self) -> list[tuple[float, float, float]]:
         """``(radius_mm, cx_mm, cy_mm)`` of every case."""
@@ -446,6 +450,52 @@ def _camera_frame_normals(space: DesignSpace) -> dict:
     return out
 
 
+def _plan_covariance(o: _Ops, space: DesignSpace, plan: CalibrationPlan, grid: dict, p_all):
+    """The plan's calibration covariance of every design (per-design arrays)."""
+    dr, F = o.dr, o.F
+    A = {k[5:]: v for k, v in grid.items() if k.startswith("plan_")}
+    designs = dr.width(A["one"])
+    ops = drjit_ops()
+    npar = len(PARAMETERS)
+    cam = space.base.camera
+    k1, k2 = float(cam.distortion[0]), float(cam.distortion[1])
+
+    def view(di):
+        P = {prm.name: dr.gather(F, p_all, di * npar + i) for i, prm in enumerate(PARAMETERS)}
+        geo = _geometry(o, P, space)
+        R, pos = geo["R"], geo["pos"]
+
+        def rot(v):
+            x, y, z = v
+            return [x + 0.0 * pos.x, R[1][1] * y + R[1][2] * z, R[2][1] * y + R[2][2] * z]
+
+        def to_cam(X):
+            return rot([X[0] - pos.x, X[1] - pos.y, X[2] - pos.z])
+
+        return {"rot": rot, "to_cam": to_cam, "pos": [pos.x, pos.y, pos.z],
+                "intr": (geo["f_px"], geo["f_px"], geo["cx"], geo["cy"], k1, k2),
+                "mirrors": [([m.n.x, m.n.y, m.n.z], m.d) for m in geo["mirrors"]]}
+
+    return plan.covariance(ops, A, view, designs)
+
+
+def plan_covariance_at(space: DesignSpace, plan: CalibrationPlan, x=None) -> np.ndarray:
+    """The covariance the model predicts for ``plan`` at one design (numpy, over
+    ``plan.names``; for checks and reports)."""
+    o = _Ops()
+    values = space.values(x)
+    p_all = o.F(np.array([values[p.name] for p in PARAMETERS]))
+    A = {f"plan_{k}": v for k, v in plan.arrays(o.F, o.U, 1).items()}
+    rows = _plan_covariance(o, space, plan, A, p_all)
+    K = len(plan.names)
+    out = np.zeros((K, K))
+    for i in range(K):
+        for j in range(K):
+            if rows[i][j] is not None:
+                out[i, j] = float(np.asarray(o.dr.detach(rows[i][j]).numpy()).reshape(-1)[0])
+    return out
+
+
 def _tangent_world(o: _Ops, R, n_world):
     """The calibration's tangent basis (``tangent_basis`` of the plane's camera-frame normal)
     carried back to the world.  Every normal of the design space has |n_cam.x| < 0.9 (the
@@ -630,7 +680,10 @@ def _grid(o: "_Ops", cond: Conditions, designs: int = 1) -> dict:
     ref = d_of_user * n_case + (n_case - 1)
     out = dict(theta=o.F(th), ct=o.F(np.cos(th)), st=o.F(np.sin(th)), r=o.F(cs[:, 0]),
                cx=o.F(cs[:, 1]), cy=o.F(cs[:, 2]), ci=o.U(block), di=o.U(block // n_case),
-               user=o.U(user), ref=o.U(ref))
+               user=o.U(user), ref=o.U(ref), udi=o.U(d_of_user))
+    if isinstance(cond.calibration, CalibrationPlan):
+        out.update({f"plan_{k}": v for k, v in
+                    cond.calibration.arrays(o.F, o.U, designs).items()})
     o.dr.eval(out)
     return out
 
@@ -922,7 +975,11 @@ def _run(o: "_Ops", space: DesignSpace, cond: Conditions, pvec, grid: dict, *, g
         B_sums = {nm: [case_sum(v) for v in view_B[nm]] for nm in singles}
         dr_sums = {nm: [[case_sum(v) for v in trio] for trio in view_dr[nm]]
                    for nm in view_dr}
-        cov = (cal.oriented(_camera_frame_normals(space)) if cal is not None else None)
+        if isinstance(cal, CalibrationPlan):
+            cov = [[None if c is None else dr.gather(F, c, grid["udi"]) for c in row]
+                   for row in _plan_covariance(o, space, cal, grid, p_all)]
+        else:
+            cov = cal.oriented(_camera_frame_normals(space)) if cal is not None else None
         var_comp, var_cal = compensation_shares(
             {nm: [at_user(v) for v in A_sums[nm]] for nm in singles},
             {nm: [at_ref(v) for v in A_sums[nm]] for nm in singles},

@@ -277,7 +277,8 @@ def conditions_dict(cond: Conditions) -> dict:
     cal = cond.calibration
     out["calibration"] = None if cal is None else {
         "source": cal.source, "parameters": list(cal.names),
-        "sigma": [float(v) for v in np.sqrt(np.clip(np.diag(cal.matrix), 0.0, None))]}
+        "sigma": ([float(v) for v in np.sqrt(np.clip(np.diag(cal.matrix), 0.0, None))]
+                  if hasattr(cal, "matrix") else "predicted per design")}
     out["diameters_mm"] = list(cond.diameters_mm)
     return out
 

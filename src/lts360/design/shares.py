@@ -257,7 +257,7 @@ def compensation_shares(case_A: dict, ref_A: dict, ref_B: dict, case_dr: dict, r
     case_dr, ref_dr : {view: list over k of three arrays}
         ``Σ m δr^k (1, cos, sin)`` per view (mm per unit of parameter k), in the case and in
         the reference.
-    cov_cal : (K, K) numpy array or None
+    cov_cal : (K, K) numpy array, or K rows of K arrays (per case; None where zero), or None
     mirror_views : list of str
         The views that get a translation (every single view but the direct one).
     shots : int
@@ -315,7 +315,7 @@ def compensation_shares(case_A: dict, ref_A: dict, ref_B: dict, case_dr: dict, r
         var_comp = sum((x[i] * Sx[i] for i in range(nt)), zero) * (1.0 / shots)
     var_cal = zero
     if cov_cal is not None:
-        K = cov_cal.shape[0]
+        K = len(cov_cal)
         dR = []
         for k in range(K):
             tot = [zero, zero, zero]
@@ -335,7 +335,13 @@ def compensation_shares(case_A: dict, ref_A: dict, ref_B: dict, case_dr: dict, r
             dR.append(val)
         for k in range(K):
             for l in range(K):
-                c = float(cov_cal[k, l])
-                if c != 0.0 and math.isfinite(c):
-                    var_cal = var_cal + dR[k] * dR[l] * c
+                if isinstance(cov_cal, np.ndarray):
+                    c = float(cov_cal[k, l])
+                    if c == 0.0 or not math.isfinite(c):
+                        continue
+                else:  # rows of arrays (one covariance per case), None where zero
+                    c = cov_cal[k][l]
+                    if c is None:
+                        continue
+                var_cal = var_cal + dR[k] * dR[l] * c
     return var_comp, var_cal
