@@ -3,7 +3,8 @@
 Times :func:`lts360.design.model.evaluate` with ``gradient=True`` on the ``paper`` rig, every
 parameter free (12), the optimiser's default conditions (diameters 10, 20, 30 mm, 180 θ per
 case, image margin 20 px, the §4.4 compensation modelled; ``--calibration FILE`` adds that
-calibration's covariance): each call a new design (a small perturbation, so no value can be
+calibration's covariance, ``--calibration plan`` the plan's, predicted per design): each
+call a new design (a small perturbation, so no value can be
 reused), warm (the first call — recording the frozen kernels, seconds — discarded); also one
 batch of :data:`lts360.design.model.BATCH` designs without gradient.  Target ≤ 10 ms a design
 on 2 cores.
@@ -28,7 +29,8 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=200)
     ap.add_argument("--json", default=None)
     ap.add_argument("--calibration", default=None,
-                    help="a calibration JSON whose covariance the model propagates")
+                    help="a calibration JSON whose covariance the model propagates, or 'plan' "
+                    "(the covariance predicted per design from the calibration plan)")
     args = ap.parse_args()
 
     from lts360.design import model as M
@@ -37,7 +39,12 @@ def main() -> None:
     from lts360.design.shares import CalibrationCovariance
 
     space = DesignSpace.create("paper")
-    cal = CalibrationCovariance.from_file(args.calibration) if args.calibration else None
+    from lts360.design.calibration import CalibrationPlan
+
+    if args.calibration == "plan":
+        cal = CalibrationPlan.from_rig(space.base)
+    else:
+        cal = CalibrationCovariance.from_file(args.calibration) if args.calibration else None
     cond = M.Conditions(diameters_mm=(10.0, 20.0, 30.0), margin_px=20.0, calibration=cal)
     x0 = space.base_x()
     t = time.perf_counter()
@@ -61,7 +68,7 @@ def main() -> None:
            "p90_ms": 1e3 * float(np.percentile(times, 90)),
            "first_call_s": first, "batch_ms_per_design": 1e3 * batch / M.BATCH,
            "parameters": len(space.free), "repeats": args.repeats,
-           "calibration_parameters": len(cal.names) if cal else 0,
+           "calibration": (args.calibration or "none"),
            "cpus": os.cpu_count(), "machine": platform.platform()}
     print(f"design + gradient ({len(space.free)} parameters): median {out['median_ms']:.2f} ms "
           f"(p10 {out['p10_ms']:.2f}, p90 {out['p90_ms']:.2f}; first call {first:.1f} s); "
