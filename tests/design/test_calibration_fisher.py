@@ -459,8 +459,9 @@ def test_plan_covariance_of_the_paper_rig_matches_the_demo_calibration():
 
 
 def _moved_plan(space, x, base_shots):
-    """The base plan for the design ``x``: camera boards moved with the camera, mirror and
-    laser boards where they were in the world (the model's rule)."""
+    """The base plan for the design ``x``: camera boards moved with the camera and deeper by
+    the focal lengths' ratio, mirror and laser boards where they were in the world (the
+    model's rule)."""
     import dataclasses
 
     base_cam = space.base.camera
@@ -472,10 +473,15 @@ def _moved_plan(space, x, base_shots):
         T[:3, 3] = -c.R.T @ c.t_mm
         return T
 
-    move = T_world_cam(cam) @ np.linalg.inv(T_world_cam(base_cam))
+    scale = cam.focal_length_mm / base_cam.focal_length_mm
     out = []
     for s in base_shots:
         if s.kind == "camera":
+            # in the camera frame: the board's centre deeper by the focal lengths' ratio
+            z = (s.board.corners_world_mm() @ base_cam.R.T + base_cam.t_mm)[:, 2].mean()
+            shift = np.eye(4)
+            shift[2, 3] = (scale - 1.0) * z
+            move = T_world_cam(cam) @ shift @ np.linalg.inv(T_world_cam(base_cam))
             s = dataclasses.replace(s, board=dataclasses.replace(
                 s.board, T_world_board=move @ s.board.T_world_board))
         out.append(s)

@@ -859,8 +859,10 @@ class CalibrationPlan:
     """A calibration plan the design model re-predicts for every design (with gradients).
 
     The plan is made once, for the base rig (:func:`plan_calibration` with ``lts360
-    calibrate``'s defaults).  As the design changes, the camera boards stay where they were
-    *relative to the camera* (the same image coverage and tilts), and the mirror and laser
+    calibrate``'s defaults).  As the design changes, the camera boards keep their image:
+    relative to the camera, each board keeps its orientation and the lateral position of its
+    centre, and the centre's depth scales with the focal length (the same pixels, the same
+    size in the image, the same tilts); the mirror and laser
     boards stay where they were *in the world* (in the measurement volume); every
     covariance (intrinsics, mirrors, laser plane, with the mirrors' carried into the laser
     boards' poses) is recomputed from the design's camera, mirrors and laser.  The laser
@@ -871,8 +873,10 @@ class CalibrationPlan:
 
     names: tuple
     mirror_names: tuple
-    cam_X: np.ndarray        # (S_c n_c, 3) camera frame
+    cam_X: np.ndarray        # (S_c n_c, 3) camera frame, base rig
     n_cam_corners: int
+    cam_centre_z: np.ndarray  # (S_c n_c,) depth of each corner's board centre, base rig
+    f_px_base: float
     mirror_X: tuple          # per mirror (S_m n, 3) world
     mirror_corners: tuple    # per mirror: corners per shot
     laser_X: np.ndarray      # (S_l n_l, 3) world
@@ -909,6 +913,8 @@ class CalibrationPlan:
         if len(cam_shots) < 3:
             raise ValueError(f"calibration plan: {len(cam_shots)} camera shots, need 3")
         cam_X = np.concatenate([s.board.corners_world_mm() @ R.T + t for s in cam_shots])
+        n_c = len(cam_shots[0].board.corners_world_mm())
+        centre_z = np.repeat(cam_X[:, 2].reshape(-1, n_c).mean(axis=1), n_c)
         mX, mC = [], []
         for name in mnames:
             sel = [s for s in shots if s.mirror == name and s.kind in ("mirror", "laser")]
@@ -938,7 +944,7 @@ class CalibrationPlan:
                       + [f"{m}.{p}" for m in sorted(mnames) for p in ("a", "b", "delta")]
                       + [f"laser.{p}" for p in ("a", "b", "delta")])
         return cls(names=names, mirror_names=mnames, cam_X=cam_X,
-                   n_cam_corners=len(cam_shots[0].board.corners_world_mm()),
+                   n_cam_corners=n_c, cam_centre_z=centre_z, f_px_base=float(K[0, 0]),
                    mirror_X=tuple(mX), mirror_corners=tuple(mC),
                    laser_X=np.concatenate([s.board.corners_world_mm() for s in lshots]),
                    n_laser_corners=len(lshots[0].board.corners_world_mm()),
@@ -969,6 +975,7 @@ class CalibrationPlan:
 
         out: dict = {}
         cols(self.cam_X, "camX", out)
+        cols(self.cam_centre_z, "camZ", out)
         out["camdi"] = di(len(self.cam_X))
         for k, X in enumerate(self.mirror_X):
             cols(X, f"m{k}X", out)
@@ -1022,7 +1029,10 @@ class CalibrationPlan:
 
         n_cam_shots = len(self.cam_X) // self.n_cam_corners
         v = view(A["camdi"])
-        cam_info = camera_information(ops, x3("camX"), v["intr"], self.n_cam_corners,
+        Xc = x3("camX")
+        # each board's centre moves in depth by f / f_base (the board keeps its image)
+        Xc[2] = Xc[2] + A["camZ"] * (v["intr"][0] * (1.0 / self.f_px_base) - 1.0)
+        cam_info = camera_information(ops, Xc, v["intr"], self.n_cam_corners,
                                       shots=n_cam_shots)
         cov_cam = scaled(spd_inverse(ops, cam_info), sc * sc)
         cov_m = []
