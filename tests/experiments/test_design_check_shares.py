@@ -134,3 +134,15 @@ def test_compensation_does_not_lower_the_scatter(shares_run):
     # paired: the same images with and without the offsets
     assert sim["compensation"]["sigma_95_um"][1] >= \
         sim["compensation_paired_uncompensated"]["sigma_95_um"][0]
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["paper", "--calibrations", "a.json", "b.json"], "need at least 3 files"),
+    (["paper", "paper-f8", "--calibrations", "a", "b", "c"], "give exactly one rig"),
+    (["paper", "--calibrations", "a.json", "b.json", "c.json"], "no file 'a.json'"),
+    (["paper", "--placement-mm", "12", "--calibrations", "a", "b", "c"], "--placement-mm"),
+])
+def test_bad_calibrations_arguments_exit_2_with_one_line(argv, message, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and "\n" not in err

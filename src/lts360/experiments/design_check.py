@@ -318,6 +318,75 @@ def _simulate_shares(rig, *, draws: int, spp: int, seed: int, placement_mm: floa
             "band_mm": [r_true - half, r_true + half], "true_calibration": cal}
 
 
+def check_calibrations(rig, files, *, spp: int = 16, seed: int = 0,
+                       placement_mm: float = 2.0) -> dict:
+    """The calibration's share from real calibrations: each file (``lts360 calibrate`` of this
+    rig, e.g. with other seeds: other boards, renders and noise) compensated on the noise-free
+    centred gauge and measuring the noise-free gauge moved by ``placement_mm`` — the whole
+    pipeline, render → calibrate → compensate → measure, once per calibration.
+
+    Returns the radius error of each calibration (µm, compensated and not), their σ with its
+    95 % interval, and the model's share for the plan's predicted covariance and for each
+    file's own covariance.
+    """
+    from lts360.design.calibration import plan_covariance
+    from lts360.design.model import Conditions, evaluate
+    from lts360.design.params import DesignSpace
+    from lts360.design.shares import CalibrationCovariance
+    from lts360.experiments.design_space.settings import BAND_MM, GAUGE_SPEC, R_STEP_MM, \
+        THETA_STEP_DEG
+    from lts360.experiments.design_space.trial import _measure_draw
+    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.scenes.objects import build_object
+    from lts360.simulator.frame import sensor_image, simulate_frame
+
+    import mitsuba as mi
+
+    if len(files) < 3:
+        raise ValueError(f"check_calibrations: need at least 3 calibration files, got {len(files)}")
+    if mi.variant() is None:
+        mi.set_variant("llvm_ad_mono")
+    render_seeds = [int(v) for v in np.random.SeedSequence(int(seed)).generate_state(2)]
+    ref_obj = build_object(GAUGE_SPEC)
+    test_obj = build_object(f"{GAUGE_SPEC}:d={GAUGE_DIAMETER_MM},x={float(placement_mm)!r},y=0")
+    frames = [simulate_frame(rig, o, spp=spp, seed=s, noise="none", thin_lens=True)
+              for o, s in zip((ref_obj, test_obj), render_seeds)]
+    ref_img, test_img = (sensor_image(rig, f.render, noise="none", seed=0)[0] for f in frames)
+    r_true = test_obj.params["diameter_mm"] / 2.0
+    centre = np.asarray(test_obj.T_world_object, dtype=float)[:2, 3]
+    half = BAND_MM + float(placement_mm)
+    grid = CylGrid.from_ranges((r_true - half, r_true + half), theta_step_deg=THETA_STEP_DEG,
+                               r_step_mm=R_STEP_MM)
+    rows = []
+    for path in files:
+        cal = dataclasses.replace(load_calibration(str(path)), view_offsets_mm={})
+        planned = _planned(cal, grid)
+        raw = _measure_draw(_measure(planned, test_img, compensate=False), r_true, centre)
+        offsets = _offsets(_measure(planned, ref_img, compensate=False))
+        comp = (math.nan if offsets is None else _measure_draw(
+            _measure(_with_offsets(planned, offsets), test_img, compensate=True), r_true,
+            centre)["radius_error_mm"])
+        cov = CalibrationCovariance.from_file(path)
+        e = evaluate(DesignSpace.create(rig), None,
+                     Conditions(diameters_mm=(GAUGE_DIAMETER_MM,), placement_mm=placement_mm,
+                                n_theta=360, calibration=cov), gradient=False)
+        rows.append({"file": str(path), "error_um": 1e3 * comp,
+                     "error_uncompensated_um": 1e3 * raw["radius_error_mm"],
+                     "model_file_covariance_um": float(e.sigma_R_cal_um[1])})
+    err = np.array([r["error_um"] for r in rows]) * 1e-3
+    plan = evaluate(DesignSpace.create(rig), None,
+                    Conditions(diameters_mm=(GAUGE_DIAMETER_MM,), placement_mm=placement_mm,
+                               n_theta=360, calibration=plan_covariance(rig)), gradient=False)
+    unc = np.array([r["error_uncompensated_um"] for r in rows]) * 1e-3
+    return {"rig": rig.name, "placement_mm": float(placement_mm), "calibrations": rows,
+            "compensated": sigma_with_interval(err),
+            "uncompensated": sigma_with_interval(unc),
+            "model_plan_um": float(plan.sigma_R_cal_um[1]),
+            "model_files_rms_um": float(np.sqrt(np.mean(
+                [r["model_file_covariance_um"] ** 2 for r in rows])))}
+
+
 def _model_shares(rig, placement_mm: float, uncertainty: dict | None, true_cal) -> dict:
     """The design model's shares for the same case (µm): noise alone, with the compensation,
     with the calibration's covariance."""
@@ -503,7 +572,13 @@ def main(argv=None) -> int:
                          "mm (default 2)")
     ap.add_argument("--calibration", default=None, metavar="FILE",
                     help="with --shares: a calibration file whose uncertainty is drawn")
+    ap.add_argument("--calibrations", nargs="+", default=None, metavar="FILE",
+                    help="the calibration share from these calibrations of the (one) rig: "
+                         "each compensates and measures the gauge (render → calibrate → "
+                         "compensate → measure)")
     args = ap.parse_args(argv)
+    if args.calibrations is not None:
+        return _main_calibrations(args)
     if not args.shares:
         if args.placement_mm is not None or args.calibration is not None:
             print("design_check: --placement-mm and --calibration need --shares",
@@ -555,6 +630,45 @@ def _main_shares(args) -> int:
         print("\n".join(format_shares(r)), flush=True)
     if args.json:
         _write_json(args.json, rows)
+    return 0
+
+
+def _main_calibrations(args) -> int:
+    placement = 2.0 if args.placement_mm is None else args.placement_mm
+    msg = None
+    if len(args.rigs) != 1:
+        msg = "--calibrations: give exactly one rig"
+    elif len(args.calibrations) < 3:
+        msg = f"--calibrations: need at least 3 files, got {len(args.calibrations)}"
+    elif not 0 <= placement <= MAX_PLACEMENT_MM:
+        msg = f"--placement-mm: must be in [0, {MAX_PLACEMENT_MM:g}], got {placement:g}"
+    else:
+        missing = [f for f in args.calibrations if not os.path.isfile(f)]
+        if missing:
+            msg = f"--calibrations: no file {missing[0]!r}"
+    rig = None
+    if msg is None:
+        try:
+            rig = load_rig(args.rigs[0])
+        except (ValueError, OSError) as exc:
+            msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    if msg is not None:
+        print(f"design_check: {msg}", file=sys.stderr)
+        return 2
+    r = check_calibrations(rig, args.calibrations, spp=args.spp, seed=args.seed,
+                           placement_mm=placement)
+    c = r["compensated"]
+    for row in r["calibrations"]:
+        print(f"  {row['file']}: radius error {row['error_um']:+.2f} µm compensated "
+              f"({row['error_uncompensated_um']:+.2f} µm not); model share with its own "
+              f"covariance {row['model_file_covariance_um']:.2f} µm")
+    print(f"{rig.name} @ +{placement:g} mm: σ over {len(r['calibrations'])} calibrations "
+          f"{c['sigma_um']:.2f} [{c['sigma_95_um'][0]:.2f}, {c['sigma_95_um'][1]:.2f}] µm "
+          f"(not compensated {r['uncompensated']['sigma_um']:.2f} µm); model: plan "
+          f"{r['model_plan_um']:.2f} µm, the files' own covariances {r['model_files_rms_um']:.2f} "
+          f"µm (rms)", flush=True)
+    if args.json:
+        _write_json(args.json, r)
     return 0
 
 
