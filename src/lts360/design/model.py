@@ -30,10 +30,14 @@ placement of its centre) and each θ of a uniform grid:
   fan), each a smooth step of its margin, multiplied (``measured``, which tends to coverage()'s
   as the sharpness grows); then the peak detector's threshold (``detected``: the line's peak,
   under the auto-exposure, above 1.25 × the 10 %-of-full-scale threshold), which loses dim
-  and strongly defocused views.  The hard coverage is computed beside it from the rig itself.
+  and strongly defocused views.  The hard coverage is computed beside it from the rig itself;
+* the §4.4 compensation's share and the calibration's (:mod:`lts360.design.shares`; the
+  calibration's covariance from a file, or predicted per design from the board plan,
+  :mod:`lts360.design.calibration`), added in quadrature to the image's own.
 
-Where the model stops (not modelled): the calibration's share and the §4.4 compensation;
-saturation and the exposure range; speckle correlated
+Where the model stops (not modelled): the coupling of the calibration's stages (its planes
+absorb its K error; the blocks are drawn independently); saturation and the exposure range;
+speckle correlated
 between pixels (speckle larger than a pixel); the sheet's curvature bias; glossy materials
 (the surface is white Lambertian); ambient light.  Every length in mm, angles in radians.
 """
