@@ -3,7 +3,6 @@ the §4.4 compensation's and the calibration's, simulated and beside the model."
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 from types import SimpleNamespace
@@ -77,25 +76,11 @@ def test_covariance_follows_a_flipped_normal():
 
 
 @pytest.fixture(scope="module")
-def shares_run(tmp_path_factory):
-    mi = pytest.importorskip("mitsuba", reason="rendering needs Mitsuba 3")
-    if "llvm_ad_mono" not in mi.variants():
-        pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
-    mi.set_variant("llvm_ad_mono")
-    from lts360.recon.calibration.model import calibration_from_frame_truth, save_calibration
+def shares_run(tmp_path_factory, truth_calibration):
     from lts360.scenes.rig_io import load_rig
-    from lts360.simulator.io import rig_truth
 
     rig = load_rig("paper")
-    t = rig_truth(rig, rig.camera.K, (rig.camera.width_px, rig.camera.height_px))
-    cal = calibration_from_frame_truth(json.loads(json.dumps(t, default=lambda v: v.tolist())))
-    cov = np.diag([1e-4**2, 1e-4**2, 0.005**2]).tolist()
-    cal = dataclasses.replace(cal, uncertainty={"camera": {"std": {"fx": 0.3, "fy": 0.3}},
-                                                "mirrors": {"left": {"cov_abd": cov},
-                                                            "right": {"cov_abd": cov}},
-                                                "laser_plane": {"cov_abd": cov}})
-    path = tmp_path_factory.mktemp("cal") / "calibration.json"
-    save_calibration(path, cal)
+    path = truth_calibration
     out = tmp_path_factory.mktemp("shares") / "shares.json"
     # half-size images, 4 spp, 4 draws: structure, not accuracy (~30 s on 2 cores)
     from lts360.experiments.design_check import check_shares
