@@ -18,6 +18,7 @@ from lts360.scenes.rig_io import load_rig
     (["--diameters-mm", "-3"], "diameters_mm: must be positive"),
     (["--min-coverage-deg", "400"], "min_coverage_deg: must be in [0, 360]"),
     (["--calibration", "no-such.json"], "--calibration: no file 'no-such.json'"),
+    (["--calibration", "pyproject.toml"], "not a calibration JSON"),
     (["--compensation-shots", "0"], "compensation_shots: must be an integer in [1, 100]"),
     (["--compensation-diameter-mm", "-1"], "compensation_diameter_mm: must be a positive"),
 ])

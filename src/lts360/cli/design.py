@@ -73,7 +73,9 @@ def _calibration(source, base):
                          "lts360 calibrate, 'plan' or 'none')")
     try:
         return CalibrationCovariance.from_file(path)
-    except (ValueError, json.JSONDecodeError) as exc:
+    except json.JSONDecodeError as exc:
+        raise UsageError(f"--calibration {source}: not a calibration JSON ({exc})") from None
+    except ValueError as exc:
         raise UsageError(f"--calibration {source}: {exc}") from None
 
 
