@@ -324,9 +324,11 @@ def _twin_corrector(args, cal):
                          "with the real image's plan)")
     if not 1 <= args.twin_spp <= 4096:
         raise UsageError(f"--twin-spp: must be in [1, 4096], got {args.twin_spp}")
+    if not 0 <= args.twin_axial_mm <= 10:
+        raise UsageError(f"--twin-axial-mm: must be in [0, 10], got {args.twin_axial_mm}")
     try:
         return TwinCorrector(cal, load_rig(args.twin_rig), material=args.twin_material,
-                             spp=args.twin_spp)
+                             spp=args.twin_spp, axial_reach_mm=args.twin_axial_mm)
     except (ValueError, KeyError, FileNotFoundError) as exc:
         raise UsageError(f"--bias-model twin: {exc}") from None
 

@@ -150,6 +150,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "gauge's)")
     s.add_argument("--twin-spp", type=int, default=64,
                    help="samples per pixel of the twin's render (default 64)")
+    s.add_argument("--twin-axial-mm", type=float, default=1.0,
+                   help="in a scan, sections within this axial distance give each section's twin "
+                        "its slope and curvature along the axis (default 1.0; 0: a straight "
+                        "prism)")
     s.set_defaults(func=cmd_measure)
 
     s = sub.add_parser("compensate", help="residual compensation (paper §4.4): the mirror "

@@ -16,7 +16,8 @@ from scipy.ndimage import median_filter, uniform_filter1d
 
 from lts360.geometry.fit import fit_circle
 
-__all__ = ["SectionProfile", "section_profile", "prism_mesh", "ray_radii"]
+__all__ = ["SectionProfile", "section_profile", "prism_mesh", "ray_radii", "AxialForm",
+           "axial_form", "loft_mesh"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -105,6 +106,152 @@ def prism_mesh(profile: SectionProfile, *, half_length_mm: float = 30.0):
         np.column_stack([np.full(n, ct), n + i, n + j]),  # top cap, normal +z
         np.column_stack([np.full(n, cb), j, i]),           # bottom cap, normal −z
     ])
+    return trimesh.Trimesh(vertices=verts, faces=faces, process=False)
+
+
+@dataclass(frozen=True, eq=False)
+class AxialForm:
+    """How the surface runs along the axis about a section: ``ρ(φ, dz) = ρ(φ) + slope·dz +
+    curvature·dz²/2`` on the profile's φ grid (radii from the section's own centre), valid for
+    ``|dz| ≤ reach_mm``; ``dz_mm`` the neighbouring sections it was fitted to."""
+
+    slope: np.ndarray
+    curvature_per_mm: np.ndarray
+    reach_mm: float
+    dz_mm: tuple
+
+    def rho_at(self, rho_mm: np.ndarray, dz_mm: float) -> np.ndarray:
+        return rho_mm + self.slope * dz_mm + 0.5 * self.curvature_per_mm * dz_mm * dz_mm
+
+
+def _robust_harmonics(phi: np.ndarray, y: np.ndarray, order: int, iters: int = 5) -> np.ndarray:
+    """``y(φ)`` (NaN = none) by a Fourier series up to ``order``, fitted by iteratively
+    reweighted least squares (Tukey's biweight at 4.685 robust σ), evaluated on ``phi``."""
+    cols = [np.ones_like(phi)]
+    for m in range(1, order + 1):
+        cols += [np.cos(m * phi), np.sin(m * phi)]
+    X = np.column_stack(cols)
+    ok = np.isfinite(y)
+    w = ok.astype(float)
+    yy = np.where(ok, y, 0.0)
+    beta = np.zeros(X.shape[1])
+    for _ in range(iters):
+        sw = np.sqrt(w)
+        beta = np.linalg.lstsq(X * sw[:, None], yy * sw, rcond=None)[0]
+        res = yy - X @ beta
+        s = 1.4826 * np.median(np.abs(res[ok])) if ok.any() else 0.0
+        if not s > 0:
+            break
+        u = res / (4.685 * s)
+        w = np.where(ok & (np.abs(u) < 1), (1 - u * u) ** 2, 0.0)
+    return X @ beta
+
+
+def axial_form(profile: SectionProfile, neighbours, *, order: int = 2,
+               reach_mm: float | None = None) -> AxialForm | None:
+    """The axial form about ``profile`` from the neighbouring sections' profiles.
+
+    Parameters
+    ----------
+    profile : SectionProfile
+        The section's own profile (its ``dz`` is 0).
+    neighbours : iterable of (dz_mm, SectionProfile)
+        Other sections of the scan, ``dz`` their axial distance from this one (the same frame).
+    order : int
+        Slope and curvature are Fourier series in φ up to this order (0: a taper and a
+        waviness, 1: a tilted or bent axis, 2: an oval that changes), fitted robustly to the
+        per-φ solutions: a section's line-centre bias varies with φ (a glint), and a per-φ
+        form would carry its difference between sections into the twin as a false slope.
+    reach_mm : float, optional
+        The largest ``|dz|`` the form is used over (default: the neighbours' largest).
+
+    Per φ, each neighbour's radius along the ray from this section's centre gives
+    ``ρ_j − ρ = slope·dz_j + curvature·dz_j²/2``, solved by least squares: with neighbours on
+    both sides (or two distinct ``dz`` on one side) slope and curvature, with one neighbour the
+    slope alone.  ``None`` without a usable neighbour.
+    """
+    rows, dzs = [], []
+    for dz, prof in neighbours:
+        dz = float(dz)
+        if not np.isfinite(dz) or dz == 0:
+            continue
+        r = ray_radii(prof.vertices_mm - profile.center_mm, profile.phi_rad)
+        if np.isfinite(r).mean() < 0.9:
+            continue
+        rows.append(r - profile.rho_mm)
+        dzs.append(dz)
+    if not rows:
+        return None
+    d = np.array(rows)  # (m, n)
+    dz = np.array(dzs)
+    quad = np.unique(np.round(dz, 9)).size >= 2
+    A = np.column_stack([dz, 0.5 * dz * dz]) if quad else dz[:, None]
+    ok = np.isfinite(d)
+    d = np.where(ok, d, 0.0)
+    # per φ a small weighted least squares (weights 0 where a neighbour's ray missed)
+    W = ok.T.astype(float)  # (n, m)
+    AtA = np.einsum("nm,mi,mj->nij", W, A, A)
+    Atb = np.einsum("nm,mi,mn->ni", W, A, d)
+    det_ok = np.abs(np.linalg.det(AtA)) > 1e-12
+    coef = np.zeros((profile.rho_mm.size, A.shape[1]))
+    coef[det_ok] = np.linalg.solve(AtA[det_ok], Atb[det_ok][..., None])[..., 0]
+    if not 0 <= int(order) <= 8:
+        raise ValueError(f"axial_form: order must be in [0, 8], got {order}")
+    phi = profile.phi_rad
+    coef[~det_ok] = np.nan
+    slope = _robust_harmonics(phi, coef[:, 0], int(order))
+    curv = _robust_harmonics(phi, coef[:, 1], int(order)) if quad else np.zeros_like(slope)
+    reach = float(np.max(np.abs(dz))) if reach_mm is None else float(reach_mm)
+    return AxialForm(slope=slope, curvature_per_mm=curv, reach_mm=reach,
+                     dz_mm=tuple(float(v) for v in dz))
+
+
+def _ring_offsets(reach_mm: float, half_length_mm: float, fine_mm: float = 0.02,
+                  fine_reach_mm: float = 1.0, coarse_mm: float = 0.1) -> np.ndarray:
+    """Axial positions of a loft's rings: ``fine_mm`` apart within ``±fine_reach_mm`` (the
+    sheet's width), ``coarse_mm`` to ``±reach_mm``, then the ends ``±half_length_mm``."""
+    f = min(fine_reach_mm, reach_mm)
+    fine = np.linspace(-f, f, 2 * max(1, int(np.ceil(f / fine_mm))) + 1)
+    out = [fine]
+    if reach_mm > f:
+        n = max(1, int(np.ceil((reach_mm - f) / coarse_mm)))
+        side = np.linspace(f, reach_mm, n + 1)[1:]
+        out += [side, -side]
+    out.append(np.array([-half_length_mm, half_length_mm]))
+    return np.unique(np.concatenate(out))
+
+
+def loft_mesh(profile: SectionProfile, form: AxialForm | None = None, *,
+              half_length_mm: float = 30.0):
+    """A watertight tube through the section: the profile carried along the axis by ``form``
+    within its reach and straight beyond it (``form = None``: the straight prism), closed by
+    flat caps at ``±half_length_mm`` (outward normals)."""
+    import trimesh
+
+    if form is None:
+        return prism_mesh(profile, half_length_mm=half_length_mm)
+    reach = min(form.reach_mm, 0.5 * half_length_mm)
+    zs = _ring_offsets(reach, half_length_mm)
+    u = np.column_stack([np.cos(profile.phi_rad), np.sin(profile.phi_rad)])
+    n = profile.rho_mm.size
+    rings = []
+    for z in zs:
+        rho = form.rho_at(profile.rho_mm, float(np.clip(z, -reach, reach)))
+        rings.append(np.column_stack([profile.center_mm + rho[:, None] * u, np.full(n, z)]))
+    m = zs.size
+    c = profile.center_mm
+    verts = np.vstack(rings + [[[c[0], c[1], zs[0]], [c[0], c[1], zs[-1]]]])
+    i = np.arange(n)
+    j = (i + 1) % n
+    quads = []
+    for r in range(m - 1):
+        a, b = r * n, (r + 1) * n
+        quads.append(np.column_stack([a + i, a + j, b + j]))
+        quads.append(np.column_stack([a + i, b + j, b + i]))
+    cb, ct = m * n, m * n + 1
+    top = (m - 1) * n
+    faces = np.vstack(quads + [np.column_stack([np.full(n, ct), top + i, top + j]),
+                               np.column_stack([np.full(n, cb), j, i])])
     return trimesh.Trimesh(vertices=verts, faces=faces, process=False)
 
 

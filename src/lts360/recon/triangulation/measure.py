@@ -258,14 +258,43 @@ def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *
     plan = plan_inverse(cal, grid, precompute=False)
     measure = make_runner(cal, peak=peak, backend=backend, compensate=compensate,
                           continuity_k=continuity_k, reject=reject)(plan)
-    clouds = []
+    done = []
     items = list(enumerate(sections))
     for k, s in (progress(items) if progress else items):
         res = measure(s.read())
-        if correct is not None:
-            res = correct(res, measure, plan)
-        clouds.append(result_to_cloud(res, z_mm=s.z_mm, section=k, timing=s.timing, cal=cal))
+        _observe(correct, res, s.z_mm, (0.0, 0.0))
+        done.append((k, s, res))
+    fixed = _correct_all(correct, [(res, measure, plan, s.z_mm, (0.0, 0.0))
+                                   for _, s, res in done])
+    clouds = [result_to_cloud(res, z_mm=s.z_mm, section=k, timing=s.timing, cal=cal)
+              for (k, s, _), res in zip(done, fixed)]
     return Cloud.concatenate(clouds)
+
+
+def _observe(correct, res, z_mm: float, centre) -> None:
+    """Show a section to a correction that looks at the whole scan first (``correct.observe``:
+    the twin's form along the axis); every section is observed before any is corrected."""
+    observe = getattr(correct, "observe", None)
+    if observe is not None:
+        observe(res, z_mm=z_mm, origin_mm=centre)
+
+
+def _correct_all(correct, items: list) -> list:
+    """Each ``(result, measure, plan, z_mm, centre)`` corrected by ``correct`` (or as it is).
+
+    A correction with ``passes() > 1`` (the twin shaped along the axis by its neighbours'
+    profiles, which carry the very bias it removes) is run again with the scan observed as
+    corrected (``correct.restart()``), each pass on the results as measured."""
+    if correct is None:
+        return [it[0] for it in items]
+    out = [correct(res, measure, plan) for res, measure, plan, _, _ in items]
+    passes = getattr(correct, "passes", None)
+    for _ in range(1, passes() if passes is not None else 1):
+        correct.restart()
+        for fixed, (_, _, _, z, centre) in zip(out, items):
+            _observe(correct, fixed, z, centre)
+        out = [correct(res, measure, plan) for res, measure, plan, _, _ in items]
+    return out
 
 
 #: A band still holds the next section when at most this share of its windowed θ is TRUNCATED
@@ -399,7 +428,9 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
 
     ``correct``: an optional ``(result, measure, plan) -> result`` applied to each section's
     result, given the measuring function and plan that made it (a model-based line-centre bias
-    correction, :mod:`lts360.twin`, measures its own synthetic image with the same plan).
+    correction, :mod:`lts360.twin`, measures its own synthetic image with the same plan).  If
+    it has ``observe(result, z_mm=, origin_mm=)``, every section is shown to it (in order,
+    ``origin_mm`` the centre it was measured about) before the first is corrected.
 
     Returns
     -------
@@ -433,7 +464,7 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
         return searches[centre]
 
     current = None  # _Band: grid, measure, n_valid when found, plan, centre
-    clouds = []
+    clouds, done = [], []
     items = list(enumerate(sections))
     for k, s in (progress(items) if progress else items):
         img = s.read()
@@ -479,10 +510,13 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
             log.found.append(True)
         log.r_range_mm.append(current.grid.r_range_mm)
         log.centre_mm.append(current.centre)
-        if correct is not None:
-            res = correct(res, current.measure, current.plan)
+        _observe(correct, res, s.z_mm, current.centre)
+        done.append((k, s, res, current))
+    fixed = _correct_all(correct, [(res, band.measure, band.plan, s.z_mm, band.centre)
+                                   for _, s, res, band in done])
+    for (k, s, _, band), res in zip(done, fixed):
         cloud = result_to_cloud(res, z_mm=s.z_mm, section=k, timing=s.timing,
-                                cal=current.plan.cal)
-        clouds.append(cloud if current.centre == (0.0, 0.0)
-                      else _about_axis(cloud, res, current.centre))
+                                cal=band.plan.cal)
+        clouds.append(cloud if band.centre == (0.0, 0.0)
+                      else _about_axis(cloud, res, band.centre))
     return Cloud.concatenate(clouds), current.grid, log
