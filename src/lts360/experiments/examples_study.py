@@ -55,7 +55,7 @@ def examples_trial(trial: Trial) -> TrialOutput:
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.measure import result_to_cloud
     from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
-    from lts360.recon.triangulation.reject import reject_spurious
+    from lts360.recon.triangulation.reject import reject_scan
     from lts360.scenes.objects import build_object
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import simulate_frame
@@ -72,7 +72,7 @@ def examples_trial(trial: Trial) -> TrialOutput:
     grid = CylGrid.from_ranges((r_lo, r_hi), theta_step_deg=float(p["theta_step_deg"]),
                                r_step_mm=float(p["r_step_mm"]))
     cal = plan = fast = None
-    clouds, t_render, t_measure, rig_truth = [], 0.0, 0.0, None
+    raws, t_render, t_measure, rig_truth = [], 0.0, 0.0, None
     for k, z in enumerate(zs):
         t0 = time.perf_counter()
         frame = simulate_frame(rig, obj, z_mm=float(z), spp=int(p["spp"]),
@@ -91,13 +91,14 @@ def examples_trial(trial: Trial) -> TrialOutput:
             except RuntimeError:
                 plan = plan_inverse(cal, grid, precompute=True)
         t0 = time.perf_counter()
-        res = fast(frame.image) if fast is not None else \
-            inverse_triangulate(frame.image, cal, grid, plan=plan)
-        if p.get("reject", True):
-            res = reject_spurious(res)
+        raws.append(fast(frame.image) if fast is not None else
+                    inverse_triangulate(frame.image, cal, grid, plan=plan))
         t_measure += time.perf_counter() - t0
-        clouds.append(result_to_cloud(res, z_mm=float(z), section=k))
-    cloud = Cloud.concatenate(clouds)
+    t0 = time.perf_counter()
+    results = reject_scan(raws, zs) if p.get("reject", True) else raws
+    t_measure += time.perf_counter() - t0
+    cloud = Cloud.concatenate([result_to_cloud(res, z_mm=float(z), section=k)
+                               for k, (z, res) in enumerate(zip(zs, results))])
     out = Path(p["out"])
     (out / "clouds").mkdir(parents=True, exist_ok=True)
     write_cloud(out / "clouds" / f"{obj.name}.ply", cloud)

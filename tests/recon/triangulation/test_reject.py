@@ -121,3 +121,108 @@ def test_reject_spurious_flags_a_faded_flank_and_keeps_a_round_section():
         "direct": dataclasses.replace(v, r_mm=rr, quality=qq)}))
     assert int(np.sum(out.views["direct"].quality == Quality.FADING)) > 0
     assert not np.any(out.views["direct"].valid & (out.views["direct"].quality != Quality.FOUND))
+
+
+def _faded(r, at_deg, width_deg):
+    """``r`` with a stretch of ``width_deg`` about ``at_deg`` faded (NaN) and its gap mask."""
+    gap = np.abs(np.degrees(TH) - at_deg) < width_deg / 2
+    return np.where(gap, np.nan, r), gap
+
+
+def test_a_round_surface_that_only_turns_dim_keeps_its_flanks():
+    """A faded stretch on a circle (a specular pipe away from its glint) has its flanks above
+    the chord by the circle's own sagitta: with an axially straight surface it is kept; with
+    the surface turning away along the axis (a shoulder, slope 1), or the slope unknown (one
+    frame), the flanks are FADING as before."""
+    from lts360.recon.triangulation.reject import convex_gaps
+
+    r0 = _circle(11.0, 0.5, -0.3)
+    r, gap = _faded(r0, 40.0, 3.0)
+    window = np.ones(TH.size, bool)
+    prof = section_profile(TH, [r])
+    flat = np.full(TH.size, 0.05)
+    kept = fading_points(r, window, STEP, profile_mm=prof, theta_rad=TH, axial_slope=flat)
+    assert not kept.any()
+    shoulder = fading_points(r, window, STEP, profile_mm=prof, theta_rad=TH,
+                             axial_slope=np.full(TH.size, 1.0))
+    one_frame = fading_points(r, window, STEP, profile_mm=prof, theta_rad=TH)
+    plain = fading_points(r, window, STEP)
+    assert plain.sum() == 2 * 26 and np.array_equal(shoulder, plain)  # 0.5 mm each side
+    assert np.array_equal(one_frame, plain)
+    m = int(round(0.5 / (11.0 * STEP)))
+    assert convex_gaps(gap, prof, TH, margin=m, reach=2 * m, axial_slope=flat)[gap].all()
+
+
+def test_a_valley_between_strands_is_never_convex():
+    """Two 1.5 mm strands' crowns with the valley between faded: the flanks dip below the
+    chord joining the crowns, so the stretch stays FADING whatever the axial slope."""
+    from lts360.recon.triangulation.reject import convex_gaps
+
+    # a scalloped section: 6 strands of radius 1.5 mm on a 4.5 mm pitch circle (Ø 9 mm)
+    centres = np.radians(np.arange(0, 360, 60))
+    x, y = np.cos(TH), np.sin(TH)
+    r = np.full(TH.size, np.nan)
+    for c in centres:
+        b = 3.0 * (x * np.cos(c) + y * np.sin(c))
+        disc = b * b - (9.0 - 1.5 ** 2)
+        r = np.fmax(r, np.where(disc >= 0, b + np.sqrt(np.maximum(disc, 0)), np.nan))
+    rv, gap = _faded(r, 30.0, 6.0)  # the valley at 30° between strands at 0° and 60°
+    prof = section_profile(TH, [rv])
+    m = int(round(0.5 / (np.nanmedian(rv) * STEP)))
+    reach = int(round(1.0 / (np.nanmedian(rv) * STEP)))
+    assert not convex_gaps(gap, prof, TH, margin=m, reach=reach,
+                           axial_slope=np.zeros(TH.size)).any()
+    assert fading_points(rv, np.ones(TH.size, bool), STEP, profile_mm=prof, theta_rad=TH,
+                         axial_slope=np.zeros(TH.size)).sum() > 20
+
+
+def test_axial_slopes_compare_neighbouring_sections_in_one_frame():
+    """|dr/dz| per θ is the larger of the two sides' differences over the pitch; sections
+    measured about other centres (frames) are not compared."""
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.inverse import InverseResult, ViewResult
+    from lts360.recon.triangulation.peaks import Quality
+    from lts360.recon.triangulation.reject import axial_slopes
+
+    grid = CylGrid.from_ranges((9.0, 13.0), theta_step_deg=0.1, r_step_mm=0.005)
+    th = grid.theta_rad
+
+    def section(radius):
+        r = np.full(th.size, radius)
+        v = ViewResult("direct", th, r, r, np.full(th.size, Quality.FOUND, np.uint8),
+                       np.ones(th.size), np.ones(th.size, bool), np.zeros(2))
+        return InverseResult(grid, {"direct": v}, "centroid", 25.5, 255.0, False)
+
+    res = [section(10.0), section(10.1), section(10.5)]  # z = 0, 0.5, 1.0
+    s = axial_slopes(res, [0.0, 0.5, 1.0])
+    assert np.allclose(s[0], 0.2) and np.allclose(s[1], 0.8) and np.allclose(s[2], 0.8)
+    s = axial_slopes(res, [0.0, 0.5, 1.0], frames=[(0, 0), (0, 0), (1.0, 0)])
+    assert np.allclose(s[1], 0.2) and np.isnan(s[2]).all()
+
+
+def test_reject_scan_keeps_a_dim_stretch_of_a_straight_pipe_and_not_of_a_shoulder():
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.inverse import InverseResult, ViewResult
+    from lts360.recon.triangulation.peaks import Quality
+    from lts360.recon.triangulation.reject import reject_scan
+
+    grid = CylGrid.from_ranges((9.0, 13.0), theta_step_deg=0.1, r_step_mm=0.005)
+    th = grid.theta_rad
+
+    def section(radius):
+        r = np.full(th.size, radius)
+        gap = np.abs(np.degrees(th) - 40.0) < 1.5
+        q = np.where(gap, Quality.NO_PEAK, Quality.FOUND).astype(np.uint8)
+        v = ViewResult("direct", th, np.where(gap, np.nan, r), r, q, np.ones(th.size),
+                       np.ones(th.size, bool), np.zeros(2))
+        return InverseResult(grid, {"direct": v}, "centroid", 25.5, 255.0, False)
+
+    def fading(results):
+        return [int(np.sum(r.views["direct"].quality == Quality.FADING)) for r in results]
+
+    straight = [section(11.0), section(11.02), section(11.0)]  # slope 0.04
+    assert fading(reject_scan(straight, [0.0, 0.5, 1.0])) == [0, 0, 0]
+    shoulder = [section(11.0), section(11.5), section(12.0)]  # slope 1
+    assert all(n > 0 for n in fading(reject_scan(shoulder, [0.0, 0.5, 1.0])))
+    # one section alone: no slope, the flanks are FADING as in a single frame
+    assert fading(reject_scan(straight[:1], [0.0]))[0] > 0

@@ -166,6 +166,39 @@ def classic_to_cloud(res: dict, *, z_mm: float, section: int) -> Cloud:
     return Cloud.concatenate(parts)
 
 
+class _Rejecting:
+    """``image -> InverseResult`` with one section's truth-free rejections
+    (:func:`lts360.recon.triangulation.reject.reject_spurious`, then the continuity test);
+    ``last_raw`` keeps the last result as measured, for the scan's own pass
+    (:func:`_reject_scan`)."""
+
+    def __init__(self, measure, continuity_k: float | None):
+        self.measure = measure
+        self.continuity_k = continuity_k
+        self.last_raw = None
+
+    def __call__(self, img):
+        from lts360.recon.triangulation.reject import reject_discontinuous, reject_spurious
+
+        self.last_raw = self.measure(img)
+        res = reject_spurious(self.last_raw)
+        k = self.continuity_k
+        return res if k is None else reject_discontinuous(res, k=k)
+
+
+def _reject_scan(done: list, raws: list, continuity_k: float | None, frames=None) -> list:
+    """The sections' results rejected again as a scan (each with its neighbours' axial slope,
+    :func:`lts360.recon.triangulation.reject.reject_scan`) when every section kept its raw
+    result and there are several; else ``done``'s results as they are."""
+    results = [d[2] for d in done]
+    if len(done) < 2 or any(r is None for r in raws):
+        return results
+    from lts360.recon.triangulation.reject import reject_scan
+
+    return reject_scan(raws, [d[1].z_mm for d in done], frames=frames,
+                       continuity_k=continuity_k)
+
+
 def make_runner(cal: Calibration, *, peak: str = "centroid", backend: str = "auto",
                 compensate: bool = False, continuity_k: float | None = None,
                 reject: bool = False):
@@ -187,14 +220,7 @@ def make_runner(cal: Calibration, *, peak: str = "centroid", backend: str = "aut
             raise ValueError(f"continuity_k must be > 0, got {continuity_k}")
         inner = make_runner(cal, peak=peak, backend=backend, compensate=compensate)
 
-        def build(plan):
-            m = inner(plan)
-
-            def measure(img):
-                res = reject_spurious(m(img))
-                return res if continuity_k is None else reject_discontinuous(res, k=continuity_k)
-            return measure
-        return build
+        return lambda plan: _Rejecting(inner(plan), continuity_k)
     if continuity_k is not None:
         from lts360.recon.triangulation.reject import reject_discontinuous
 
@@ -258,14 +284,15 @@ def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *
     plan = plan_inverse(cal, grid, precompute=False)
     measure = make_runner(cal, peak=peak, backend=backend, compensate=compensate,
                           continuity_k=continuity_k, reject=reject)(plan)
-    done = []
+    done, raws = [], []
     items = list(enumerate(sections))
     for k, s in (progress(items) if progress else items):
         res = measure(s.read())
-        _observe(correct, res, s.z_mm, (0.0, 0.0))
         done.append((k, s, res))
+        raws.append(getattr(measure, "last_raw", None))
+    results = _reject_scan(done, raws, continuity_k)
     fixed = _correct_all(correct, [(res, measure, plan, s.z_mm, (0.0, 0.0))
-                                   for _, s, res in done])
+                                   for (_, s, _), res in zip(done, results)])
     clouds = [result_to_cloud(res, z_mm=s.z_mm, section=k, timing=s.timing, cal=cal)
               for (k, s, _), res in zip(done, fixed)]
     return Cloud.concatenate(clouds)
@@ -280,13 +307,16 @@ def _observe(correct, res, z_mm: float, centre) -> None:
 
 
 def _correct_all(correct, items: list) -> list:
-    """Each ``(result, measure, plan, z_mm, centre)`` corrected by ``correct`` (or as it is).
+    """Each ``(result, measure, plan, z_mm, centre)`` corrected by ``correct`` (or as it is),
+    every section observed first (:func:`_observe`).
 
     A correction with ``passes() > 1`` (the twin shaped along the axis by its neighbours'
     profiles, which carry the very bias it removes) is run again with the scan observed as
     corrected (``correct.restart()``), each pass on the results as measured."""
     if correct is None:
         return [it[0] for it in items]
+    for res, _, _, z, centre in items:
+        _observe(correct, res, z, centre)
     out = [correct(res, measure, plan) for res, measure, plan, _, _ in items]
     passes = getattr(correct, "passes", None)
     for _ in range(1, passes() if passes is not None else 1):
@@ -464,7 +494,7 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
         return searches[centre]
 
     current = None  # _Band: grid, measure, n_valid when found, plan, centre
-    clouds, done = [], []
+    clouds, done, raws = [], [], []
     items = list(enumerate(sections))
     for k, s in (progress(items) if progress else items):
         img = s.read()
@@ -510,10 +540,11 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
             log.found.append(True)
         log.r_range_mm.append(current.grid.r_range_mm)
         log.centre_mm.append(current.centre)
-        _observe(correct, res, s.z_mm, current.centre)
         done.append((k, s, res, current))
+        raws.append(getattr(current.measure, "last_raw", None))
+    results = _reject_scan(done, raws, continuity_k, frames=[d[3].centre for d in done])
     fixed = _correct_all(correct, [(res, band.measure, band.plan, s.z_mm, band.centre)
-                                   for _, s, res, band in done])
+                                   for (_, s, _, band), res in zip(done, results)])
     for (k, s, _, band), res in zip(done, fixed):
         cloud = result_to_cloud(res, z_mm=s.z_mm, section=k, timing=s.timing,
                                 cal=band.plan.cal)

@@ -20,7 +20,16 @@ from the measurement alone:
     does so because the surface turns into the laser's shadow or behind a neighbouring flank,
     and the last points before the gap lie on the sheet's tail (measured: the spurious points
     of the grooved shaft's helix and of a cable's valleys sit within 0.5 mm of such a gap).  A
-    round section's lines end at the window's edges, never inside, so it loses nothing here.
+    round section's lines end at the window's edges, never inside, so it loses nothing here
+    unless its surface turns dim for light: a specular pipe between glints.  In a scan
+    (:func:`reject_scan`) such a stretch is kept when the section's profile bulges across it
+    at least ``convex_fraction`` of a circle's sagitta on both flanks (chords
+    ``convex_reach_mm`` beyond them), stays within ``round_tol_mm`` of the section's circle,
+    *and* the surface runs straight along the axis there (``|dr/dz|`` to the neighbouring
+    sections below ``max_axial_slope``): a corner bulges too, and a section is round at a
+    shoulder or a groove's flank, where the line fades for geometry (:func:`convex_gaps`).
+    Measured on the examples with realistic noise (STUDIES.md): the alu pipe's FADING
+    1141 → 246 points; the other objects' spurious points unchanged within 10.
 ``NOTCH``
     A valid point whose θ lies in a notch of the section's measured profile: the profile (the
     median of the views per θ, a running median and mean over ±5 samples) lies more than
@@ -51,6 +60,8 @@ __all__ = ["continuity_outliers", "reject_discontinuous", "DEFAULT_CONTINUITY_K"
            "DEFAULT_CONTINUITY_WINDOW_DEG", "DEFAULT_CONTINUITY_FLOOR_MM", "fading_points",
            "section_profile", "notch_depth", "reject_spurious", "rejection_counts",
            "REJECTION_CODES", "DEFAULT_FADE_MARGIN_MM", "DEFAULT_FADE_GAP_MM",
+           "convex_gaps", "axial_slopes", "reject_scan", "DEFAULT_SHORT_GAP_MM",
+           "DEFAULT_SHORT_MARGIN_MM",
            "DEFAULT_NOTCH_DEPTH_MM", "DEFAULT_NOTCH_SCALES_MM"]
 
 DEFAULT_CONTINUITY_K = 6.0
@@ -60,6 +71,18 @@ DEFAULT_CONTINUITY_FLOOR_MM = 0.015
 #: Arc next to a faded stretch whose points are rejected, and the shortest faded stretch.
 DEFAULT_FADE_MARGIN_MM = 0.5
 DEFAULT_FADE_GAP_MM = 0.3
+#: The narrower tier: the line's last 0.07 mm before a faded stretch of 0.1 mm or more.
+DEFAULT_SHORT_GAP_MM = 0.1
+DEFAULT_SHORT_MARGIN_MM = 0.07
+#: In a scan, a faded stretch across which the profile is convex is kept: chords this far
+#: beyond its flanks, which must bulge by this fraction of a circle's sagitta (0: lie above
+#: the chord at all; the round and axial tests below do the separating, measured)...
+DEFAULT_CONVEX_REACH_MM = 1.0
+DEFAULT_CONVEX_FRACTION = 0.0
+#: ... and along which the surface runs straighter than this (|dr/dz| between sections).
+DEFAULT_MAX_AXIAL_SLOPE = 0.3
+#: ... and where the section is round: its profile within this of its least-squares circle.
+DEFAULT_ROUND_TOL_MM = 0.15
 #: Depth below the profile's chord that makes a notch, and the chords' half-lengths (arc).
 DEFAULT_NOTCH_DEPTH_MM = 0.08
 DEFAULT_NOTCH_SCALES_MM = (0.5, 1.0)
@@ -156,11 +179,115 @@ def _dilate(mask: np.ndarray, half: int, periodic: bool) -> np.ndarray:
     return (c[hi] - c[lo]) > 0
 
 
+def _chord_depth(filled: np.ndarray, theta: np.ndarray, i: np.ndarray, a: np.ndarray,
+                 b: np.ndarray) -> np.ndarray:
+    """How far the profile point ``i`` lies below the chord from profile point ``a`` to ``b``
+    (mm, negative above it: convex), the chord's outward side being away from the origin."""
+    pts = np.column_stack([filled * np.cos(theta), filled * np.sin(theta)])
+    e = pts[b] - pts[a]
+    norm = np.linalg.norm(e, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        nrm = np.column_stack([e[:, 1], -e[:, 0]]) / norm[:, None]
+        return np.where(norm > 0, np.einsum("ij,ij->i", pts[a] - pts[i], nrm), np.nan)
+
+
+def convex_gaps(gap: np.ndarray, profile_mm: np.ndarray, theta_rad: np.ndarray, *,
+                margin: int, reach: int, fraction: float = DEFAULT_CONVEX_FRACTION,
+                periodic: bool = True, axial_slope=None,
+                max_axial_slope: float = DEFAULT_MAX_AXIAL_SLOPE,
+                round_tol_mm: float = DEFAULT_ROUND_TOL_MM) -> np.ndarray:
+    """(n,) bool: the samples of each stretch of ``gap`` across which the section's profile is
+    convex and the surface runs straight along the axis, so that the line cannot have faded
+    there for geometry.
+
+    ``axial_slope`` (n,): ``|dr/dz|`` per θ from the neighbouring sections
+    (:func:`axial_slopes`); a stretch whose median over it and its flanks is unknown or above
+    ``max_axial_slope`` is never convex here (a section is round at a shoulder or a groove's
+    flank too: there the surface turns away along the axis, which one section cannot see).
+    Nor is one where the profile leaves the section's least-squares circle by more than
+    ``round_tol_mm`` over the chord: a corner or a strand bulges too, but its neighbouring
+    face or strand can hide the line; only a round surface cannot.
+
+    For a stretch ``[a, b]`` the chord joins the profile ``reach`` samples beyond its ends; its
+    flanks (``margin`` samples each side, where FADING would reject) must lie above it by at
+    least ``fraction`` of what a circle of the profile's radius would (``s₁s₂ / 2R`` at arc
+    distances ``s₁, s₂`` from the chord's ends), on both sides.  A valley, a groove or a
+    shoulder's shadow puts a flank below its chord; a round surface that only turns dim (a
+    specular pipe away from its glint) keeps both above.  Gaps in the profile are bridged
+    along θ for the chords' ends.
+    """
+    n = gap.size
+    prof = np.asarray(profile_mm, float)
+    ok = np.isfinite(prof)
+    out = np.zeros(n, bool)
+    if axial_slope is None or not gap.any() or ok.sum() < 3 or margin < 1 or reach < 1:
+        return out
+    slope = np.asarray(axial_slope, float)
+    filled = np.interp(theta_rad, theta_rad[ok], prof[ok],
+                       period=2 * np.pi if periodic else None)
+    R = float(np.median(prof[ok]))
+    step = float(np.median(np.diff(theta_rad)))
+    from scipy.ndimage import label
+
+    from lts360.geometry.fit import fit_circle
+
+    xy = np.column_stack([prof[ok] * np.cos(theta_rad[ok]), prof[ok] * np.sin(theta_rad[ok])])
+    circ = fit_circle(xy)
+    off_circle = np.abs(np.hypot(filled * np.cos(theta_rad) - circ.center_mm[0],
+                                 filled * np.sin(theta_rad) - circ.center_mm[1])
+                        - circ.radius_mm)
+
+    tiled = np.concatenate([gap, gap, gap]) if periodic else gap
+    lab, nlab = label(tiled)
+    offset = n if periodic else 0
+    for k in range(1, nlab + 1):
+        idx = np.flatnonzero(lab == k)
+        lo, hi = int(idx[0]), int(idx[-1])
+        if periodic and not (n <= lo < 2 * n):  # each stretch once: the one starting in the middle
+            continue
+        lo, hi = lo - offset, hi - offset
+        if hi - lo + 1 >= n:
+            continue
+        ca, cb = lo - margin - reach, hi + margin + reach
+        left = np.arange(lo - margin, lo)
+        right = np.arange(hi + 1, hi + 1 + margin)
+        if not periodic and (ca < 0 or cb >= n):
+            continue
+        zone = slope[np.arange(lo - margin, hi + 1 + margin) % n]
+        if not (np.isfinite(zone).mean() > 0.5
+                and np.nanmedian(zone) < max_axial_slope):
+            continue
+        if np.max(off_circle[np.arange(ca, cb + 1) % n]) > round_tol_mm:
+            continue
+        fl = []
+        for side in (left, right):
+            i = side % n
+            d = _chord_depth(filled, theta_rad, i, np.full(i.size, ca % n), np.full(i.size, cb % n))
+            s1 = (side - ca) * step * R
+            s2 = (cb - side) * step * R
+            circle = s1 * s2 / (2.0 * R)
+            fl.append(np.nanmean(d + fraction * circle))
+        if all(np.isfinite(v) and v < 0 for v in fl):
+            out[np.arange(lo, hi + 1) % n] = True
+    return out
+
+
 def fading_points(r_mm, window, theta_step_rad: float, *,
                   margin_mm: float = DEFAULT_FADE_MARGIN_MM, gap_mm: float = DEFAULT_FADE_GAP_MM,
-                  periodic: bool = True) -> np.ndarray:
+                  periodic: bool = True, profile_mm=None, theta_rad=None,
+                  convex_reach_mm: float = DEFAULT_CONVEX_REACH_MM,
+                  convex_fraction: float = DEFAULT_CONVEX_FRACTION, axial_slope=None,
+                  max_axial_slope: float = DEFAULT_MAX_AXIAL_SLOPE,
+                  round_tol_mm: float = DEFAULT_ROUND_TOL_MM,
+                  short_gap_mm: float = DEFAULT_SHORT_GAP_MM,
+                  short_margin_mm: float = DEFAULT_SHORT_MARGIN_MM) -> np.ndarray:
     """(n,) bool: valid radii within ``margin_mm`` of arc of a stretch of at least ``gap_mm``
     of the window (``window``) with no valid radius.
+
+    With the section's profile (``profile_mm`` on ``theta_rad``) and the surface's axial slope
+    from the scan (``axial_slope``), a stretch across which the profile is convex and the
+    surface straight along the axis (:func:`convex_gaps`, chords ``convex_reach_mm`` beyond
+    the flanks) does not count: the line faded there for light, not for geometry.
 
     Parameters
     ----------
@@ -171,6 +298,9 @@ def fading_points(r_mm, window, theta_step_rad: float, *,
     theta_step_rad : float
     margin_mm, gap_mm : float, >= 0
     periodic : bool
+    short_gap_mm, short_margin_mm : float
+        A second, narrower tier: the valid radii within ``short_margin_mm`` of a stretch of at
+        least ``short_gap_mm`` (a valley a cable hides only in part; 0 turns it off).
     """
     r = np.asarray(r_mm, dtype=float).ravel()
     win = np.asarray(window, dtype=bool).ravel()
@@ -181,20 +311,35 @@ def fading_points(r_mm, window, theta_step_rad: float, *,
     if not valid.any():
         return np.zeros(r.size, bool)
     arc = float(np.median(r[valid])) * theta_step_rad  # mm per sample at the view's radius
-    gap = win & ~valid
-    g = max(1, int(round(gap_mm / arc)))
+    faded = win & ~valid
     # Stretches of at least g faded samples (a periodic θ: the stretch may wrap round).
     from scipy.ndimage import label
 
     n = r.size
-    tiled = np.concatenate([gap, gap, gap]) if periodic else gap
+    tiled = np.concatenate([faded, faded, faded]) if periodic else faded
     lab, _ = label(tiled)
     size = np.bincount(lab.ravel())
     size[0] = 0
-    long_ = size[lab] >= g
-    gap = long_[n:2 * n] if periodic else long_
-    m = max(1, int(round(margin_mm / arc)))
-    return valid & _dilate(gap, m, periodic)
+    out = np.zeros(n, bool)
+    tiers = [(gap_mm, margin_mm)]
+    if short_gap_mm > 0 and short_margin_mm > 0:
+        tiers.append((short_gap_mm, short_margin_mm))
+    for gap_t, margin_t in tiers:
+        g = max(1, int(round(gap_t / arc)))
+        long_ = size[lab] >= g
+        gap = long_[n:2 * n] if periodic else long_
+        m = max(1, int(round(margin_t / arc)))
+        if profile_mm is not None and axial_slope is not None and convex_reach_mm > 0:
+            # the flanks judged over the main margin in both tiers (a few samples are noise)
+            m_judge = max(m, int(round(margin_mm / arc)))
+            gap = gap & ~convex_gaps(gap, profile_mm, np.asarray(theta_rad, float),
+                                     margin=m_judge,
+                                     reach=max(1, int(round(convex_reach_mm / arc))),
+                                     fraction=convex_fraction, periodic=periodic,
+                                     axial_slope=axial_slope, max_axial_slope=max_axial_slope,
+                                     round_tol_mm=round_tol_mm)
+        out |= _dilate(gap, m, periodic)
+    return valid & out
 
 
 def _nanmedian_rows(a: np.ndarray) -> np.ndarray:
@@ -258,7 +403,14 @@ def notch_depth(theta_rad, profile_mm, *, scales_mm=DEFAULT_NOTCH_SCALES_MM,
 def reject_spurious(result: InverseResult, *, fade_margin_mm: float = DEFAULT_FADE_MARGIN_MM,
                     fade_gap_mm: float = DEFAULT_FADE_GAP_MM,
                     notch_depth_mm: float | None = DEFAULT_NOTCH_DEPTH_MM,
-                    notch_scales_mm=DEFAULT_NOTCH_SCALES_MM) -> InverseResult:
+                    notch_scales_mm=DEFAULT_NOTCH_SCALES_MM,
+                    convex_reach_mm: float = DEFAULT_CONVEX_REACH_MM,
+                    convex_fraction: float = DEFAULT_CONVEX_FRACTION,
+                    axial_slope=None,
+                    max_axial_slope: float = DEFAULT_MAX_AXIAL_SLOPE,
+                    round_tol_mm: float = DEFAULT_ROUND_TOL_MM,
+                    short_gap_mm: float = DEFAULT_SHORT_GAP_MM,
+                    short_margin_mm: float = DEFAULT_SHORT_MARGIN_MM) -> InverseResult:
     """The result with fading points flagged ``FADING`` and points in a notch ``NOTCH`` (see
     the module docstring), both dropped from the valid points.
 
@@ -272,11 +424,11 @@ def reject_spurious(result: InverseResult, *, fade_margin_mm: float = DEFAULT_FA
     periodic = grid.is_full_turn
     step = grid.theta_step_rad
     depth = None
+    prof = section_profile(grid.theta_rad, [v.r_mm for v in result.views.values()],
+                           periodic=periodic)
     if notch_depth_mm is not None:
         if not notch_depth_mm > 0:
             raise ValueError(f"notch_depth_mm must be > 0 or None, got {notch_depth_mm}")
-        prof = section_profile(grid.theta_rad, [v.r_mm for v in result.views.values()],
-                               periodic=periodic)
         depth = notch_depth(grid.theta_rad, prof, scales_mm=notch_scales_mm, periodic=periodic)
     views = {}
     for name, v in result.views.items():
@@ -286,11 +438,62 @@ def reject_spurious(result: InverseResult, *, fade_margin_mm: float = DEFAULT_FA
             q[valid & (depth > notch_depth_mm)] = Quality.NOTCH
         if fade_margin_mm > 0:
             fade = fading_points(v.r_mm, v.window, step, margin_mm=fade_margin_mm,
-                                 gap_mm=fade_gap_mm, periodic=periodic)
+                                 gap_mm=fade_gap_mm, periodic=periodic, profile_mm=prof,
+                                 theta_rad=grid.theta_rad, convex_reach_mm=convex_reach_mm,
+                                 convex_fraction=convex_fraction, axial_slope=axial_slope,
+                                 max_axial_slope=max_axial_slope, round_tol_mm=round_tol_mm,
+                                 short_gap_mm=short_gap_mm, short_margin_mm=short_margin_mm)
             q[fade] = Quality.FADING
         out = valid & ((q == Quality.NOTCH) | (q == Quality.FADING))
         views[name] = dataclasses.replace(v, r_mm=np.where(out, np.nan, v.r_mm), quality=q)
     return dataclasses.replace(result, views=views)
+
+
+def axial_slopes(results, z_mm, *, frames=None) -> list:
+    """Per section, ``|dr/dz|`` per θ between its profile and its neighbours' (the larger of
+    the two sides; NaN where unknown): the surface's slope along the axis, from the scan.
+
+    ``results``: the sections' :class:`InverseResult` as measured (before any rejection);
+    ``z_mm``: their stage heights; ``frames``: an optional key per section (the centre it was
+    measured about): sections in different frames, or on different θ grids, are not compared.
+    """
+    zs = [float(z) for z in z_mm]
+    keys = list(frames) if frames is not None else [None] * len(results)
+    profs = []
+    for res in results:
+        g = res.grid
+        p = section_profile(g.theta_rad, [v.r_mm for v in res.views.values()],
+                            periodic=g.is_full_turn)
+        ok = np.isfinite(p)
+        profs.append(np.interp(g.theta_rad, g.theta_rad[ok], p[ok],
+                               period=2 * np.pi if g.is_full_turn else None)
+                     if ok.sum() >= 3 else np.full(g.n_theta, np.nan))
+    out = []
+    for k, res in enumerate(results):
+        best = np.full(res.grid.n_theta, np.nan)
+        for j in (k - 1, k + 1):
+            if not (0 <= j < len(results)) or keys[j] != keys[k] or zs[j] == zs[k] \
+                    or profs[j].size != profs[k].size \
+                    or not np.allclose(results[j].grid.theta_rad, res.grid.theta_rad):
+                continue
+            s = np.abs(profs[j] - profs[k]) / abs(zs[j] - zs[k])
+            best = np.fmax(best, s)
+        out.append(best)
+    return out
+
+
+def reject_scan(results, z_mm, *, frames=None, continuity_k: float | None = None,
+                **kwargs) -> list:
+    """:func:`reject_spurious` (then :func:`reject_discontinuous` with ``continuity_k``) on
+    every section of a scan, with each section's axial slope from its neighbours
+    (:func:`axial_slopes`), so that a faded stretch on a convex, axially straight surface is
+    kept (:func:`convex_gaps`)."""
+    slopes = axial_slopes(results, z_mm, frames=frames)
+    out = []
+    for res, sl in zip(results, slopes):
+        r = reject_spurious(res, axial_slope=sl, **kwargs)
+        out.append(r if continuity_k is None else reject_discontinuous(r, k=continuity_k))
+    return out
 
 
 def rejection_counts(quality) -> dict[str, int]:
