@@ -60,7 +60,7 @@ __all__ = ["continuity_outliers", "reject_discontinuous", "DEFAULT_CONTINUITY_K"
            "DEFAULT_CONTINUITY_WINDOW_DEG", "DEFAULT_CONTINUITY_FLOOR_MM", "fading_points",
            "section_profile", "notch_depth", "reject_spurious", "rejection_counts",
            "REJECTION_CODES", "DEFAULT_FADE_MARGIN_MM", "DEFAULT_FADE_GAP_MM",
-           "convex_gaps", "axial_slopes", "reject_scan", "DEFAULT_SHORT_GAP_MM",
+           "convex_gaps", "axial_slopes", "reject_scan", "ProfileGeometry", "DEFAULT_SHORT_GAP_MM",
            "DEFAULT_SHORT_MARGIN_MM",
            "DEFAULT_NOTCH_DEPTH_MM", "DEFAULT_NOTCH_SCALES_MM"]
 
@@ -179,11 +179,40 @@ def _dilate(mask: np.ndarray, half: int, periodic: bool) -> np.ndarray:
     return (c[hi] - c[lo]) > 0
 
 
-def _chord_depth(filled: np.ndarray, theta: np.ndarray, i: np.ndarray, a: np.ndarray,
-                 b: np.ndarray) -> np.ndarray:
+@dataclasses.dataclass(frozen=True, eq=False)
+class ProfileGeometry:
+    """A section's profile made ready for :func:`convex_gaps`, once per section: gaps bridged
+    along θ (``filled``), its points, and each point's distance from the profile's
+    least-squares circle."""
+
+    theta_rad: np.ndarray
+    filled_mm: np.ndarray
+    points_mm: np.ndarray
+    off_circle_mm: np.ndarray
+    radius_mm: float
+    n_measured: int
+
+    @classmethod
+    def of(cls, theta_rad, profile_mm, *, periodic: bool = True) -> "ProfileGeometry":
+        from lts360.geometry.fit import fit_circle
+
+        th = np.asarray(theta_rad, float)
+        prof = np.asarray(profile_mm, float)
+        ok = np.isfinite(prof)
+        if ok.sum() < 3:
+            nan = np.full(th.size, np.nan)
+            return cls(th, nan, np.column_stack([nan, nan]), nan, float("nan"), int(ok.sum()))
+        filled = np.interp(th, th[ok], prof[ok], period=2 * np.pi if periodic else None)
+        pts = np.column_stack([filled * np.cos(th), filled * np.sin(th)])
+        circ = fit_circle(pts[ok])
+        off = np.abs(np.hypot(pts[:, 0] - circ.center_mm[0], pts[:, 1] - circ.center_mm[1])
+                     - circ.radius_mm)
+        return cls(th, filled, pts, off, float(np.median(prof[ok])), int(ok.sum()))
+
+
+def _chord_depth(pts: np.ndarray, i: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """How far the profile point ``i`` lies below the chord from profile point ``a`` to ``b``
     (mm, negative above it: convex), the chord's outward side being away from the origin."""
-    pts = np.column_stack([filled * np.cos(theta), filled * np.sin(theta)])
     e = pts[b] - pts[a]
     norm = np.linalg.norm(e, axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -217,25 +246,17 @@ def convex_gaps(gap: np.ndarray, profile_mm: np.ndarray, theta_rad: np.ndarray, 
     along θ for the chords' ends.
     """
     n = gap.size
-    prof = np.asarray(profile_mm, float)
-    ok = np.isfinite(prof)
     out = np.zeros(n, bool)
-    if axial_slope is None or not gap.any() or ok.sum() < 3 or margin < 1 or reach < 1:
+    if axial_slope is None or not gap.any() or margin < 1 or reach < 1:
+        return out
+    geo = profile_mm if isinstance(profile_mm, ProfileGeometry) else \
+        ProfileGeometry.of(theta_rad, profile_mm, periodic=periodic)
+    if geo.n_measured < 3:
         return out
     slope = np.asarray(axial_slope, float)
-    filled = np.interp(theta_rad, theta_rad[ok], prof[ok],
-                       period=2 * np.pi if periodic else None)
-    R = float(np.median(prof[ok]))
-    step = float(np.median(np.diff(theta_rad)))
+    pts, R, off_circle = geo.points_mm, geo.radius_mm, geo.off_circle_mm
+    step = float(np.median(np.diff(geo.theta_rad)))
     from scipy.ndimage import label
-
-    from lts360.geometry.fit import fit_circle
-
-    xy = np.column_stack([prof[ok] * np.cos(theta_rad[ok]), prof[ok] * np.sin(theta_rad[ok])])
-    circ = fit_circle(xy)
-    off_circle = np.abs(np.hypot(filled * np.cos(theta_rad) - circ.center_mm[0],
-                                 filled * np.sin(theta_rad) - circ.center_mm[1])
-                        - circ.radius_mm)
 
     tiled = np.concatenate([gap, gap, gap]) if periodic else gap
     lab, nlab = label(tiled)
@@ -262,7 +283,7 @@ def convex_gaps(gap: np.ndarray, profile_mm: np.ndarray, theta_rad: np.ndarray, 
         fl = []
         for side in (left, right):
             i = side % n
-            d = _chord_depth(filled, theta_rad, i, np.full(i.size, ca % n), np.full(i.size, cb % n))
+            d = _chord_depth(pts, i, np.full(i.size, ca % n), np.full(i.size, cb % n))
             s1 = (side - ca) * step * R
             s2 = (cb - side) * step * R
             circle = s1 * s2 / (2.0 * R)
@@ -324,6 +345,9 @@ def fading_points(r_mm, window, theta_step_rad: float, *,
     tiers = [(gap_mm, margin_mm)]
     if short_gap_mm > 0 and short_margin_mm > 0:
         tiers.append((short_gap_mm, short_margin_mm))
+    if profile_mm is not None and axial_slope is not None \
+            and not isinstance(profile_mm, ProfileGeometry):
+        profile_mm = ProfileGeometry.of(theta_rad, profile_mm, periodic=periodic)
     for gap_t, margin_t in tiers:
         g = max(1, int(round(gap_t / arc)))
         long_ = size[lab] >= g
@@ -430,6 +454,8 @@ def reject_spurious(result: InverseResult, *, fade_margin_mm: float = DEFAULT_FA
         if not notch_depth_mm > 0:
             raise ValueError(f"notch_depth_mm must be > 0 or None, got {notch_depth_mm}")
         depth = notch_depth(grid.theta_rad, prof, scales_mm=notch_scales_mm, periodic=periodic)
+    geo = (ProfileGeometry.of(grid.theta_rad, prof, periodic=periodic)
+           if axial_slope is not None else None)
     views = {}
     for name, v in result.views.items():
         q = v.quality.copy()
@@ -438,7 +464,8 @@ def reject_spurious(result: InverseResult, *, fade_margin_mm: float = DEFAULT_FA
             q[valid & (depth > notch_depth_mm)] = Quality.NOTCH
         if fade_margin_mm > 0:
             fade = fading_points(v.r_mm, v.window, step, margin_mm=fade_margin_mm,
-                                 gap_mm=fade_gap_mm, periodic=periodic, profile_mm=prof,
+                                 gap_mm=fade_gap_mm, periodic=periodic,
+                                 profile_mm=prof if geo is None else geo,
                                  theta_rad=grid.theta_rad, convex_reach_mm=convex_reach_mm,
                                  convex_fraction=convex_fraction, axial_slope=axial_slope,
                                  max_axial_slope=max_axial_slope, round_tol_mm=round_tol_mm,
