@@ -226,3 +226,38 @@ def test_reject_scan_keeps_a_dim_stretch_of_a_straight_pipe_and_not_of_a_shoulde
     assert all(n > 0 for n in fading(reject_scan(shoulder, [0.0, 0.5, 1.0])))
     # one section alone: no slope, the flanks are FADING as in a single frame
     assert fading(reject_scan(straight[:1], [0.0]))[0] > 0
+
+
+def test_in_a_scan_a_round_sections_shallow_notch_is_kept_and_a_valley_is_not():
+    """An 80 µm ripple on a round section (a glint's structured error: a dip between two
+    bumps 0.5 mm away) is a NOTCH in one frame but not in a scan, where the profile is within
+    0.1 mm of the section's circle; a 0.3 mm valley is a NOTCH in both."""
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.inverse import InverseResult, ViewResult
+    from lts360.recon.triangulation.peaks import Quality
+    from lts360.recon.triangulation.reject import reject_scan
+
+    grid = CylGrid.from_ranges((9.0, 13.0), theta_step_deg=0.1, r_step_mm=0.005)
+    th = grid.theta_rad
+
+    def section(depth, ripple=False):
+        deg = np.degrees(th) - 40.0
+        if ripple:  # arc s about 40°: −depth at s = 0, +depth at s = ±0.5 mm
+            s_mm = np.radians(deg) * 11.0
+            dip = np.where(np.abs(s_mm) <= 0.75, depth * np.cos(2 * np.pi * s_mm / 1.0), 0.0)
+        else:
+            dip = depth * np.clip(1 - np.abs(deg) / 3.0, 0, None)
+        r = 11.0 - dip
+        v = ViewResult("direct", th, r, r, np.full(th.size, Quality.FOUND, np.uint8),
+                       np.ones(th.size), np.ones(th.size, bool), np.zeros(2))
+        return InverseResult(grid, {"direct": v}, "centroid", 25.5, 255.0, False)
+
+    def notches(results):
+        return [int(np.sum(r.views["direct"].quality == Quality.NOTCH)) for r in results]
+
+    zs = [0.0, 0.5, 1.0]
+    shallow = [section(0.08, ripple=True)] * 3
+    assert notches(reject_scan(shallow[:1], zs[:1]))[0] > 0
+    assert notches(reject_scan(shallow, zs)) == [0, 0, 0]
+    deep = [section(0.3)] * 3
+    assert all(n > 0 for n in notches(reject_scan(deep, zs)))

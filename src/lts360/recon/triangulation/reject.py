@@ -39,7 +39,10 @@ from the measurement alone:
     flanks' sheet tails, 0.1–0.5 mm off.  A convex section lies above every chord (a circle
     by L²/2R), so only the noise of the smoothed profile can reach the depth; measured on
     rendered round objects with realistic noise the 80 µm default rejects ≤ 0.3 % of their
-    points.
+    points.  In a scan, no notch is called where the profile stays within
+    ``notch_round_tol_mm`` of the section's least-squares circle: there a "notch" is a glint's
+    structured error or noise (the alu pipe's 159 NOTCH points → 33), while a cable's valleys
+    lie farther off the circle.
 
 Agreement between views is not used as a criterion: on rendered round objects the views'
 radii where they overlap (grazing points at the windows' ends) differ by up to 80 µm
@@ -86,6 +89,9 @@ DEFAULT_ROUND_TOL_MM = 0.15
 #: Depth below the profile's chord that makes a notch, and the chords' half-lengths (arc).
 DEFAULT_NOTCH_DEPTH_MM = 0.08
 DEFAULT_NOTCH_SCALES_MM = (0.5, 1.0)
+#: In a scan, no notch where the profile is within this of the section's circle (a round
+#: section's glints and noise; a cable's valleys lie farther off it).
+DEFAULT_NOTCH_ROUND_TOL_MM = 0.1
 #: Samples each side of the profile's running median and mean.
 _PROFILE_HALF = 5
 #: Truth-free rejections, by the name ``lts360 score`` and the cloud's header give them.
@@ -434,7 +440,8 @@ def reject_spurious(result: InverseResult, *, fade_margin_mm: float = DEFAULT_FA
                     max_axial_slope: float = DEFAULT_MAX_AXIAL_SLOPE,
                     round_tol_mm: float = DEFAULT_ROUND_TOL_MM,
                     short_gap_mm: float = DEFAULT_SHORT_GAP_MM,
-                    short_margin_mm: float = DEFAULT_SHORT_MARGIN_MM) -> InverseResult:
+                    short_margin_mm: float = DEFAULT_SHORT_MARGIN_MM,
+                    notch_round_tol_mm: float = DEFAULT_NOTCH_ROUND_TOL_MM) -> InverseResult:
     """The result with fading points flagged ``FADING`` and points in a notch ``NOTCH`` (see
     the module docstring), both dropped from the valid points.
 
@@ -458,20 +465,24 @@ def reject_spurious(result: InverseResult, *, fade_margin_mm: float = DEFAULT_FA
         if not notch_depth_mm > 0:
             raise ValueError(f"notch_depth_mm must be > 0 or None, got {notch_depth_mm}")
         depth = notch_depth(grid.theta_rad, prof, scales_mm=notch_scales_mm, periodic=periodic)
-    geo = (ProfileGeometry.of(grid.theta_rad, prof, periodic=periodic)
-           if axial_slope is not None else None)
+    scan = axial_slope is not None and bool(np.isfinite(np.asarray(axial_slope, float)).any())
+    geo = ProfileGeometry.of(grid.theta_rad, prof, periodic=periodic) if scan else None
     views = {}
     for name, v in result.views.items():
         q = v.quality.copy()
         valid = v.valid
         if depth is not None:
-            q[valid & (depth > notch_depth_mm)] = Quality.NOTCH
+            notch = depth > notch_depth_mm
+            if geo is not None:  # a scan: a round section's shallow notch is noise or glint
+                notch &= ~(geo.off_circle_mm <= notch_round_tol_mm)
+            q[valid & notch] = Quality.NOTCH
         if fade_margin_mm > 0:
             fade = fading_points(v.r_mm, v.window, step, margin_mm=fade_margin_mm,
                                  gap_mm=fade_gap_mm, periodic=periodic,
                                  profile_mm=prof if geo is None else geo,
                                  theta_rad=grid.theta_rad, convex_reach_mm=convex_reach_mm,
-                                 convex_fraction=convex_fraction, axial_slope=axial_slope,
+                                 convex_fraction=convex_fraction,
+                                 axial_slope=axial_slope if scan else None,
                                  max_axial_slope=max_axial_slope, round_tol_mm=round_tol_mm,
                                  short_gap_mm=short_gap_mm,
                                  # the narrow tier only where a round surface's dim stretches
