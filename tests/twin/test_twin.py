@@ -228,7 +228,9 @@ def test_measure_with_the_twin_records_it_in_the_cloud(small_gauge_frame, tmp_pa
     assert main(["measure", str(small_gauge_frame), "--calibration",
                  str(small_gauge_frame / "frame.json"), "--out", str(out),
                  "--bias-model", "twin", "--twin-spp", "16"]) == 0
-    assert "twin bias correction: direct" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "twin bias correction: direct" in printed
+    assert "one section, so its twin is a straight prism" in printed  # says what it cannot do
     header = out.read_bytes().split(b"end_header")[0].decode()
     assert header.count("comment lts360 twin ") == 3
     from lts360.recon.triangulation.cloud import read_cloud_twin

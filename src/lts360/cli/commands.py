@@ -290,6 +290,9 @@ def cmd_measure(args) -> int:
         print("  not measured: " + ", ".join(f"{n} {name}" for name, n in flagged))
     if twin is not None:
         print("  " + twin.log.describe())
+        if len(sections) == 1:
+            print("  twin: one section, so its twin is a straight prism: a surface curved along "
+                  "the axis (a waviness) is not modelled; measure a scan to shape it")
         skipped = [k for k, s in enumerate(twin.log.sections) if s["skipped"]]
         if skipped:
             print(f"  twin: {len(skipped)} section(s) not corrected (too few points): "
