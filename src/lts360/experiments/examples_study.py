@@ -9,7 +9,9 @@ green mirrors, as in the paper — and one section against the truth), ``inspect
 measured ones) and a row of the error table.  One trial per object, so an interrupted study
 resumes object by object.
 
-The calibration is the rendered frames' true one by default (``--calibration`` to measure
+Each scan is measured as ``lts360 measure`` measures it with no ``--radius-mm``: the radial band
+found from the image, the scan's own rejection pass.  The calibration is the rendered frames'
+true one by default (``--calibration`` to measure
 with an estimated one): the examples then show the algorithm and the optics, not the
 calibration.  Occlusions (the valleys between a cable's strands, the cut tube's gap) are
 reported as missing coverage, not as error.
@@ -35,14 +37,6 @@ PAPER_EXAMPLES = {
 VIEW_COLOURS = {0: "tab:red", 1: "tab:blue", 2: "tab:green"}
 
 
-def _radius_band(obj, zs: np.ndarray, margin_mm: float = 1.0) -> tuple[float, float]:
-    th = np.linspace(-np.pi, np.pi, 1441)
-    T, Z = np.meshgrid(th, zs)
-    r = obj.radius_fn(T.ravel(), Z.ravel())
-    r = r[np.isfinite(r)]
-    return max(0.5, float(r.min()) - margin_mm), float(r.max()) + margin_mm
-
-
 def examples_trial(trial: Trial) -> TrialOutput:
     """Render and measure one object's scan; write its cloud and figure; return its metrics."""
     import time
@@ -51,11 +45,8 @@ def examples_trial(trial: Trial) -> TrialOutput:
 
     from lts360.experiments.score import score_cloud
     from lts360.recon.calibration.model import calibration_from_frame_truth, load_calibration
-    from lts360.recon.triangulation.cloud import Cloud, write_cloud
-    from lts360.recon.triangulation.grid import CylGrid
-    from lts360.recon.triangulation.measure import result_to_cloud
-    from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
-    from lts360.recon.triangulation.reject import reject_scan
+    from lts360.recon.triangulation.cloud import write_cloud
+    from lts360.recon.triangulation.measure import Section, measure_sections_following
     from lts360.scenes.objects import build_object
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import simulate_frame
@@ -68,11 +59,7 @@ def examples_trial(trial: Trial) -> TrialOutput:
     n, pitch = int(p["sections"]), float(p["pitch_mm"])
     zc = float(np.mean(obj.measured_zone_z_mm))
     zs = zc + (np.arange(n) - (n - 1) / 2.0) * pitch
-    r_lo, r_hi = _radius_band(obj, zs)
-    grid = CylGrid.from_ranges((r_lo, r_hi), theta_step_deg=float(p["theta_step_deg"]),
-                               r_step_mm=float(p["r_step_mm"]))
-    cal = plan = fast = None
-    raws, t_render, t_measure, rig_truth = [], 0.0, 0.0, None
+    cal, sections, t_render, rig_truth = None, [], 0.0, None
     for k, z in enumerate(zs):
         t0 = time.perf_counter()
         frame = simulate_frame(rig, obj, z_mm=float(z), spp=int(p["spp"]),
@@ -82,23 +69,14 @@ def examples_trial(trial: Trial) -> TrialOutput:
             rig_truth = json.loads(json.dumps(frame.truth, default=lambda v: v.tolist()))
         if cal is None:
             cal = load_calibration(p["calibration"]) if p["calibration"] else \
-                calibration_from_frame_truth(json.loads(json.dumps(frame.truth,
-                                                                   default=lambda v: v.tolist())))
-            try:
-                from lts360.recon.triangulation.fast import FastInverse
-
-                fast = FastInverse(plan_inverse(cal, grid, precompute=False))
-            except RuntimeError:
-                plan = plan_inverse(cal, grid, precompute=True)
-        t0 = time.perf_counter()
-        raws.append(fast(frame.image) if fast is not None else
-                    inverse_triangulate(frame.image, cal, grid, plan=plan))
-        t_measure += time.perf_counter() - t0
+                calibration_from_frame_truth(rig_truth)
+        sections.append(Section(Path(f"{obj.name}-{k:03d}"), float(z), image=frame.image))
+    # the radial band found from the image, as `lts360 measure` does with no --radius-mm
     t0 = time.perf_counter()
-    results = reject_scan(raws, zs) if p.get("reject", True) else raws
-    t_measure += time.perf_counter() - t0
-    cloud = Cloud.concatenate([result_to_cloud(res, z_mm=float(z), section=k)
-                               for k, (z, res) in enumerate(zip(zs, results))])
+    cloud, _, band_log = measure_sections_following(
+        sections, cal, theta_step_deg=float(p["theta_step_deg"]),
+        r_step_mm=float(p["r_step_mm"]), reject=p.get("reject", True))
+    t_measure = time.perf_counter() - t0
     out = Path(p["out"])
     (out / "clouds").mkdir(parents=True, exist_ok=True)
     write_cloud(out / "clouds" / f"{obj.name}.ply", cloud)
@@ -114,6 +92,7 @@ def examples_trial(trial: Trial) -> TrialOutput:
             "n_rejected_fading": m["rejected"]["fading"],
             "n_rejected_notch": m["rejected"]["notch"],
             "spurious_rms_mm": (m.get("spurious") or {}).get("rms_mm") or 0.0,
+            "n_band_searches": len(band_log.searched),
             "render_s_per_section": t_render / n, "measure_s_per_section": t_measure / n,
             "view_rms_mm": np.array([m["views"].get(v, {}).get("rms_mm") or np.nan for v in views]),
             "view_coverage_deg": np.array([m["views"].get(v, {}).get("coverage_deg", 0.0)

@@ -67,7 +67,7 @@ def line_speed_trial(trial: Trial) -> TrialOutput:
     """Render one moving frame, measure it with the true calibration, score it two ways."""
     import mitsuba as mi
 
-    from lts360.experiments.examples_study import _radius_band
+    from lts360.experiments.score import true_radius_band
     from lts360.recon.calibration.model import calibration_from_frame_truth
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.inverse import inverse_triangulate
@@ -97,7 +97,7 @@ def line_speed_trial(trial: Trial) -> TrialOutput:
               scale=float(p["scale"]))
     frame = simulate_moving_frame(rig, obj, acq, **kw)
     cal = calibration_from_frame_truth(frame.truth)
-    lo, hi = _radius_band(obj, np.array([0.0]))
+    lo, hi = true_radius_band(obj, np.array([0.0]))
     grid = CylGrid.from_ranges((lo, hi), theta_step_deg=0.25, r_step_mm=0.005)
     T_placed = stage_transform(0.0) @ np.asarray(obj.T_world_object, float)
 

@@ -23,8 +23,8 @@ from lts360.recon.triangulation.cloud import VIEW_NAMES, Cloud
 from lts360.recon.triangulation.reject import rejection_counts
 from lts360.scenes.objects import SceneObject, build_object
 
-__all__ = ["load_truth", "load_rig_truth", "signed_mesh_distance", "score_cloud", "error_stats",
-           "measurable"]
+__all__ = ["true_radius_band", "load_truth", "load_rig_truth", "signed_mesh_distance",
+           "score_cloud", "error_stats", "measurable"]
 
 
 def measurable(points_mm: np.ndarray, view_codes: np.ndarray, obj: SceneObject, rig_truth: dict,
@@ -102,6 +102,17 @@ def measurable(points_mm: np.ndarray, view_codes: np.ndarray, obj: SceneObject, 
 def _clear_subset(clear, centre: np.ndarray, z: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """``clear`` towards ``centre`` (moved by each point's z) for the masked points."""
     return clear(centre[None, :] + z) & mask
+
+
+def true_radius_band(obj: SceneObject, zs, margin_mm: float = 1.0) -> tuple[float, float]:
+    """The radii the object's surface spans over the heights ``zs`` (about the axis), widened
+    by ``margin_mm``: a search band taken from the truth, for tests and studies that isolate
+    the detector from the band search (``lts360 measure`` finds its band in the image)."""
+    th = np.linspace(-np.pi, np.pi, 1441)
+    T, Z = np.meshgrid(th, np.asarray(zs, dtype=float))
+    r = obj.radius_fn(T.ravel(), Z.ravel())
+    r = r[np.isfinite(r)]
+    return max(0.5, float(r.min()) - margin_mm), float(r.max()) + margin_mm
 
 
 def load_truth(truth_dir) -> tuple[SceneObject, list[float]]:

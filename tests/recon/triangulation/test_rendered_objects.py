@@ -50,7 +50,7 @@ def test_object_section_within_its_tolerance(name):
     if "llvm_ad_mono" not in mi.variants():
         pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
     mi.set_variant("llvm_ad_mono")
-    from lts360.experiments.examples_study import _radius_band
+    from lts360.experiments.score import true_radius_band
     from lts360.experiments.score import score_cloud
     from lts360.recon.calibration.model import calibration_from_frame_truth
     from lts360.recon.triangulation.grid import CylGrid
@@ -64,7 +64,7 @@ def test_object_section_within_its_tolerance(name):
     z = float(np.mean(obj.measured_zone_z_mm))
     frame = simulate_frame(load_rig("paper"), obj, z_mm=z, spp=16, seed=3, noise="none")
     truth = json.loads(json.dumps(frame.truth, default=lambda v: v.tolist()))
-    lo, hi = _radius_band(obj, np.array([z]))
+    lo, hi = true_radius_band(obj, np.array([z]))
     res = inverse_triangulate(frame.image, calibration_from_frame_truth(truth),
                               CylGrid.from_ranges((lo, hi), theta_step_deg=0.2, r_step_mm=0.005))
     m = score_cloud(result_to_cloud(res, z_mm=z, section=0), obj, rig_truth=truth)
