@@ -137,3 +137,87 @@ def test_continuity_flags_a_point_off_its_view_profile():
     out = continuity_outliers(r, half_window=20)
     assert np.flatnonzero(out).tolist() == [200, 201, 2500]
     assert not continuity_outliers(np.full(th.size, np.nan), half_window=20).any()
+
+
+def test_self_occlusion_of_a_circle_is_the_far_half_closed_form():
+    """A ray along +x from a point of a circle re-enters it exactly when the point lies on the
+    circle's −x half; an outward ray never does."""
+    from lts360.recon.triangulation.band import Profile, self_occluded
+
+    th = np.radians(np.arange(-180.0, 180.0, 0.5))
+    centre = (1.5, -2.0)
+    p = Profile(th, _circle_r(th, centre, 8.0), np.ones(th.size, bool), True)
+    r = p.at(th)
+    local = np.arctan2(r * np.sin(th) - centre[1], r * np.cos(th) - centre[0])
+    along_x = np.tile([1.0, 0.0], (th.size, 1))
+    hidden = self_occluded(p, th, along_x)
+    # off the tangent points, where the ray dips less than 0.04 mm into the circle (the
+    # march's tolerance is 0.02 mm) or rises less than 0.066 mm above it 0.5 mm on (it may
+    # graze within 0.05 mm there)
+    clear = np.abs(np.cos(local)) > 0.1
+    assert np.array_equal(hidden[clear], (np.cos(local) < 0)[clear])
+    outward = np.column_stack([np.cos(local), np.sin(local)])
+    assert not self_occluded(p, th, outward).any()
+
+
+def test_a_valley_s_far_flank_stays_in_the_window_and_a_strand_behind_another_is_hidden(
+        cal, search):
+    """Cable-like profile: six Ø7 mm strands about a 7 mm circle.  The window of the profile's
+    circle keeps the flanks that turn away (their fading is what FADING reads); the θ whose
+    path to a camera crosses the next strand are hidden.  A round section's windows are those
+    of its own normal and nothing of it is hidden."""
+    from lts360.recon.triangulation.band import Profile, hidden_rows
+    from lts360.recon.triangulation.views import view_windows
+
+    th = np.radians(np.arange(-180.0, 180.0, 1.0))
+
+    def strands(t):
+        c = [(7.0 * np.cos(a), 7.0 * np.sin(a)) for a in np.radians(np.arange(0, 360, 60))]
+        with np.errstate(invalid="ignore"):
+            return np.nanmax([_circle_r(t, ci, 3.5) for ci in c], axis=0)
+
+    for r_of in (lambda t: np.full(t.size, 10.0), strands):
+        prof = Profile(th, r_of(th), np.ones(th.size, bool), True)
+        grid = search.fine_grid(prof, theta_step_deg=0.5, r_step_mm=0.01)
+        rng = (grid.radii_mm()[:, 0], grid.radii_mm()[:, -1])
+        names = ("direct", "left", "right")
+        own = view_windows(cal, rng, grid.theta_rad, views=names,
+                           normal_angle_rad=prof.normal_angle_at(grid.theta_rad))
+        got = profile_windows(cal, grid, prof)
+        hidden = hidden_rows(cal, grid, prof, got)
+        assert all(np.all(got[n] >= own[n]) and not np.any(hidden[n] & ~got[n]) for n in names)
+        added = sum(int(np.sum(got[n] & ~own[n])) for n in names)
+        n_hidden = sum(int(hidden[n].sum()) for n in names)
+        if np.ptp(prof.r_mm) == 0:
+            assert added == 0 and n_hidden == 0
+        else:
+            assert added > 20 and n_hidden > 20, (added, n_hidden)
+
+
+def test_hidden_rows_are_flagged_and_count_as_faded():
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.inverse import InverseResult, ViewResult
+    from lts360.recon.triangulation.reject import fading_points, mark_hidden, rejection_counts
+
+    grid = CylGrid.from_ranges((9.0, 11.0), theta_step_deg=0.5, r_step_mm=0.01)
+    n = grid.n_theta
+    win = np.zeros(n, bool)
+    win[100:400] = True
+    r = np.where(win, 10.0, np.nan)
+    v = ViewResult("direct", grid.theta_rad, r, r.copy(),
+                   np.where(win, Quality.FOUND, Quality.OUTSIDE_WINDOW).astype(np.uint8),
+                   np.where(win, 100.0, np.nan), win, np.zeros(2))
+    v.r_mm[260] = np.nan  # a row without a peak keeps its reason
+    v.quality[260] = Quality.NO_PEAK
+    res = InverseResult(grid, {"direct": v}, "centroid", 10.0, None, False)
+    hid = np.zeros(n, bool)
+    hid[250:280] = True  # 15° hidden: 2.6 mm of arc
+    out = mark_hidden(res, {"direct": hid})
+    w = out.views["direct"]
+    assert np.all(np.isnan(w.r_mm[250:280])) and w.quality[260] == Quality.NO_PEAK
+    assert np.sum(w.quality[250:280] == Quality.HIDDEN) == 29
+    assert rejection_counts(w.quality)["hidden"] == 29
+    assert np.isfinite(w.r_mm[249]) and np.isfinite(w.r_mm[280])
+    fade = fading_points(w.r_mm, w.window, grid.theta_step_rad)
+    # 0.5 mm of arc either side of the hidden stretch: 6 samples of 0.087 mm (r = 10 mm, 0.5°)
+    assert fade[244:250].all() and fade[280:286].all() and not fade[200:240].any()

@@ -66,9 +66,9 @@ def test_rejection_counts_name_every_code():
     from lts360.recon.triangulation.peaks import Quality
 
     q = np.array([Quality.NOTCH, Quality.NOTCH, Quality.FADING, Quality.FOUND,
-                  Quality.DISCONTINUOUS, Quality.TRUNCATED], np.uint8)
-    assert rejection_counts(q) == {"continuity": 1, "fading": 1, "notch": 2, "truncated": 1,
-                                   "saturated_plateau": 0}
+                  Quality.DISCONTINUOUS, Quality.TRUNCATED, Quality.HIDDEN], np.uint8)
+    assert rejection_counts(q) == {"continuity": 1, "fading": 1, "notch": 2, "hidden": 1,
+                                   "truncated": 1, "saturated_plateau": 0}
 
 
 def test_bad_arguments():

@@ -17,7 +17,10 @@ stripe on its radial line; :func:`follow_profile` turns those candidates into on
 
 The fine grid is then ``r₀(θ) ± half_width`` per θ (:meth:`CylGrid.following`) and each
 view's θ window is derived with the profile's own surface normal (``θ − atan(r₀′/r₀)``), so a
-part off the axis keeps the right facing test.  A line that still leaves the band is flagged
+part off the axis keeps the right facing test, joined with the window of the profile's
+least-squares circle (a valley's far flank stays in the window, where its fading is read);
+the θ whose path to the view's camera the profile itself crosses are marked ``HIDDEN``
+(:func:`hidden_rows`).  A line that still leaves the band is flagged
 ``TRUNCATED`` by the detector, never measured.
 
 What it assumes: one section (a closed or open curve, star-shaped about the axis: one
@@ -43,6 +46,7 @@ from lts360.recon.triangulation.views import (DEFAULT_MAX_INCIDENCE_DEG, DIRECT,
                                               view_windows)
 
 __all__ = ["BandSearch", "Profile", "follow_profile", "measurable_radii", "profile_windows",
+           "self_occluded", "hidden_rows",
            "DEFAULT_COARSE_THETA_STEP_DEG", "DEFAULT_COARSE_R_STEP_MM",
            "DEFAULT_FOLLOW_HALF_WIDTH_MM", "DEFAULT_OUTLIER_MM"]
 
@@ -116,6 +120,21 @@ class Profile:
         dr = (self.at(th + h) - self.at(th - h)) / (2 * h)
         return th - np.arctan2(dr, self.at(th))
 
+    def circle_normal_angle_at(self, theta_rad) -> np.ndarray | None:
+        """Direction of the outward normal of the profile's least-squares circle at the
+        profile's points ``r₀(θ)`` (``None`` if no circle fits the measured θ)."""
+        from lts360.geometry.fit import fit_circle
+
+        th = np.asarray(theta_rad, dtype=float)
+        pts = np.column_stack([self.r_mm * np.cos(self.theta_rad),
+                               self.r_mm * np.sin(self.theta_rad)])
+        try:
+            c = fit_circle(pts[self.measured]).center_mm
+        except ValueError:
+            return None
+        r = self.at(th)
+        return np.arctan2(r * np.sin(th) - c[1], r * np.cos(th) - c[0])
+
 
 def _running_nanmedian(values: np.ndarray, half: int, periodic: bool) -> np.ndarray:
     """Median of the finite values of ``values[..., i − half : i + half + 1]`` (rows: last
@@ -185,11 +204,103 @@ def follow_profile(theta_rad, candidates_mm, *, periodic: bool,
 
 def profile_windows(cal: Calibration, grid: CylGrid, profile: Profile, *, views=None,
                     max_incidence_deg: float = DEFAULT_MAX_INCIDENCE_DEG) -> dict[str, np.ndarray]:
-    """θ windows of a grid that follows ``profile``, with the profile's surface normals."""
+    """θ windows of a grid that follows ``profile``: where the profile's own surface normal
+    faces the view, or the normal of the profile's least-squares circle does.
+
+    The profile's normal keeps the facing test right for a part off the axis and for a cube's
+    faces.  The circle's keeps a valley's far flank (a cable's, a groove's) inside the window
+    although the profile turns away there: a line that fades out inside the window is what
+    the truth-free ``FADING`` test reads (:mod:`lts360.recon.triangulation.reject`), and a
+    window that ended with the turning profile would hide that fading from it.  On a round
+    section the two normals agree and so do the windows.  What the profile hides from a view
+    inside its window is found by :func:`hidden_rows`.
+    """
     names = (DIRECT,) + cal.mirror_names if views is None else tuple(views)
     r = grid.radii_mm()
-    return view_windows(cal, (r[:, 0], r[:, -1]), grid.theta_rad, max_incidence_deg,
-                        views=names, normal_angle_rad=profile.normal_angle_at(grid.theta_rad))
+    rng = (r[:, 0], r[:, -1])
+    own = view_windows(cal, rng, grid.theta_rad, max_incidence_deg, views=names,
+                       normal_angle_rad=profile.normal_angle_at(grid.theta_rad))
+    circle = profile.circle_normal_angle_at(grid.theta_rad)
+    if circle is None:
+        return own
+    round_ = view_windows(cal, rng, grid.theta_rad, max_incidence_deg, views=names,
+                         normal_angle_rad=circle)
+    return {name: own[name] | round_[name] for name in own}
+
+
+def hidden_rows(cal: Calibration, grid: CylGrid, profile: Profile,
+                windows: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Per view, the θ of its window whose path to the view's (virtual) camera the profile
+    itself crosses (:func:`self_occluded`): a strand's flank behind its neighbour, the far
+    side of a cable whose valleys tilt the normal towards a camera.  Marked ``HIDDEN`` by the
+    rejection (:func:`lts360.recon.triangulation.reject.mark_hidden`); never set on a convex
+    section."""
+    th = grid.theta_rad
+    r0 = profile.at(th)
+    pts = np.column_stack([r0 * np.cos(th), r0 * np.sin(th)])
+    T = cal.T_meas_cam
+    out = {}
+    for view in get_views(cal, tuple(windows)):
+        win = np.asarray(windows[view.name], bool)
+        mask = np.zeros(th.size, bool)
+        idx = np.flatnonzero(win)
+        if idx.size:
+            c = T[:3, :3] @ view.virtual_camera_cam_mm + T[:3, 3]
+            mask[idx] = self_occluded(profile, th[idx], c[None, :2] - pts[idx])
+        out[view.name] = mask
+    return out
+
+
+#: The march of :func:`self_occluded`: its step (a path through a strand's edge shorter than
+#: that may be missed), where it starts off the surface, and how deep below the profile a
+#: sample must lie to count as inside (the profile's smoothing is ~10 µm)...
+_OCCLUSION_STEP_MM = 0.1
+_OCCLUSION_START_MM = 0.05
+_OCCLUSION_TOL_MM = 0.02
+#: ... and, from this far on along the path, how close above the profile it may pass and still
+#: count as hidden: the coarse profile (1°, medians over ±3°) shaves a strand's crest and
+#: cannot clear a path that grazes it.  A convex section's own path rises above it by more
+#: (at 80° incidence on a Ø6 mm gauge, 0.13 mm at 0.5 mm).
+_GRAZE_FROM_MM = 0.5
+_GRAZE_CLEARANCE_MM = 0.05
+
+
+def self_occluded(profile: Profile, theta_rad, direction_xy) -> np.ndarray:
+    """(n,) bool: whether the ray from the profile's point at each θ, along ``direction_xy``
+    (n, 2) (the path to a camera projected on the laser plane), passes inside the profile, or
+    grazes it (within ``_GRAZE_CLEARANCE_MM`` from ``_GRAZE_FROM_MM`` on).
+
+    The section is taken as a prism along the axis, so a path that rises out of the laser plane
+    towards a camera is hidden exactly where its projection enters the section.  The ray is
+    marched in ``_OCCLUSION_STEP_MM`` steps from ``_OCCLUSION_START_MM`` off the surface until
+    it leaves the profile's largest radius.
+    """
+    th = np.asarray(theta_rad, dtype=float).ravel()
+    d = np.asarray(direction_xy, dtype=float).reshape(th.size, 2)
+    norm = np.linalg.norm(d, axis=1)
+    hidden = np.zeros(th.size, bool)
+    ok = norm > 0
+    if not ok.any():
+        return hidden
+    d = d[ok] / norm[ok, None]
+    r0 = profile.at(th[ok])
+    p = np.column_stack([r0 * np.cos(th[ok]), r0 * np.sin(th[ok])])
+    r_out = float(np.max(profile.r_mm)) + _GRAZE_CLEARANCE_MM
+    # where the ray leaves the circle of radius r_out: |p + t d| = r_out
+    pd = np.einsum("ij,ij->i", p, d)
+    t_exit = -pd + np.sqrt(np.maximum(pd**2 - np.einsum("ij,ij->i", p, p) + r_out**2, 0.0))
+    n_steps = int(np.ceil(max(float(t_exit.max()) - _OCCLUSION_START_MM, 0.0)
+                          / _OCCLUSION_STEP_MM)) + 1
+    t = _OCCLUSION_START_MM + _OCCLUSION_STEP_MM * np.arange(n_steps)
+    margin = np.where(t < _GRAZE_FROM_MM, -_OCCLUSION_TOL_MM, _GRAZE_CLEARANCE_MM)
+    inside = np.zeros(d.shape[0], bool)
+    for chunk in np.array_split(np.arange(n_steps), max(1, n_steps // 64)):
+        q = p[:, None, :] + t[None, chunk, None] * d[:, None, :]
+        rq = np.hypot(q[..., 0], q[..., 1])
+        below = rq < profile.at(np.arctan2(q[..., 1], q[..., 0])) + margin[None, chunk]
+        inside |= np.any(below & (t[None, chunk] <= t_exit[:, None]), axis=1)
+    hidden[ok] = inside
+    return hidden
 
 
 class BandSearch:

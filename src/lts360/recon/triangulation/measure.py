@@ -172,15 +172,18 @@ class _Rejecting:
     ``last_raw`` keeps the last result as measured, for the scan's own pass
     (:func:`_reject_scan`)."""
 
-    def __init__(self, measure, continuity_k: float | None):
+    def __init__(self, measure, continuity_k: float | None, hidden: dict | None = None):
         self.measure = measure
         self.continuity_k = continuity_k
+        self.hidden = hidden
         self.last_raw = None
 
     def __call__(self, img):
-        from lts360.recon.triangulation.reject import reject_discontinuous, reject_spurious
+        from lts360.recon.triangulation.reject import (mark_hidden, reject_discontinuous,
+                                                       reject_spurious)
 
-        self.last_raw = self.measure(img)
+        raw = self.measure(img)
+        self.last_raw = raw if not self.hidden else mark_hidden(raw, self.hidden)
         res = reject_spurious(self.last_raw)
         k = self.continuity_k
         return res if k is None else reject_discontinuous(res, k=k)
@@ -201,7 +204,7 @@ def _reject_scan(done: list, raws: list, continuity_k: float | None, frames=None
 
 def make_runner(cal: Calibration, *, peak: str = "centroid", backend: str = "auto",
                 compensate: bool = False, continuity_k: float | None = None,
-                reject: bool = False):
+                reject: bool = False, hidden: dict | None = None):
     """A function ``plan -> (image -> InverseResult)`` on the chosen backend.
 
     ``backend``: ``numpy`` (the reference), ``llvm`` or ``cuda`` (the Dr.Jit kernel of the
@@ -211,7 +214,9 @@ def make_runner(cal: Calibration, *, peak: str = "centroid", backend: str = "aut
     their view's local r(θ) by more than k·σ
     (:func:`lts360.recon.triangulation.reject.reject_discontinuous`; ``None``: off).
     ``reject``: flag fading points and points in notches
-    (:func:`lts360.recon.triangulation.reject.reject_spurious`), before the continuity test.
+    (:func:`lts360.recon.triangulation.reject.reject_spurious`), before the continuity test;
+    ``hidden`` (view → (nθ,) bool, with ``reject``): rows the first-pass profile hides from the
+    view, flagged ``HIDDEN`` first (:func:`lts360.recon.triangulation.reject.mark_hidden`).
     """
     if reject:
         from lts360.recon.triangulation.reject import reject_discontinuous, reject_spurious
@@ -220,7 +225,7 @@ def make_runner(cal: Calibration, *, peak: str = "centroid", backend: str = "aut
             raise ValueError(f"continuity_k must be > 0, got {continuity_k}")
         inner = make_runner(cal, peak=peak, backend=backend, compensate=compensate)
 
-        return lambda plan: _Rejecting(inner(plan), continuity_k)
+        return lambda plan: _Rejecting(inner(plan), continuity_k, hidden)
     if continuity_k is not None:
         from lts360.recon.triangulation.reject import reject_discontinuous
 
@@ -473,7 +478,7 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
 
     from lts360.recon.calibration.model import shift_origin
     from lts360.recon.triangulation.band import (DEFAULT_FOLLOW_HALF_WIDTH_MM, BandSearch,
-                                                 Profile, profile_windows)
+                                                 Profile, hidden_rows, profile_windows)
 
     w = DEFAULT_FOLLOW_HALF_WIDTH_MM if half_width_mm is None else float(half_width_mm)
     if not w > 0:
@@ -527,9 +532,10 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
                 srch = search_at(centre)
                 grid = srch.fine_grid(profile, theta_step_deg=theta_step_deg,
                                       r_step_mm=r_step_mm, half_width_mm=w)
-                plan = plan_inverse(srch.cal, grid, precompute=False,
-                                    windows=profile_windows(srch.cal, grid, profile))
-                measure = make_runner(srch.cal, **kw)(plan)
+                windows = profile_windows(srch.cal, grid, profile)
+                plan = plan_inverse(srch.cal, grid, precompute=False, windows=windows)
+                hidden = hidden_rows(srch.cal, grid, profile, windows) if reject else None
+                measure = make_runner(srch.cal, **kw, hidden=hidden)(plan)
                 log.plan_s += time.perf_counter() - t
                 current = _Band(grid, measure, 0, plan, centre)
             t = time.perf_counter()

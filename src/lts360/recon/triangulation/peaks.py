@@ -90,6 +90,10 @@ class Quality(IntEnum):
     #: the camera or into the laser's shadow there, and the last points before it lie on the
     #: sheet's tail.
     FADING = 9
+    #: Set by :mod:`lts360.recon.triangulation.reject` in a band found from the image: the
+    #: first-pass profile itself crosses the path from this θ to the view's (virtual) camera
+    #: (a strand's flank behind its neighbour); what the line shows there is another surface.
+    HIDDEN = 10
 
 
 @dataclass(frozen=True, eq=False)

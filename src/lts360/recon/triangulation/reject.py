@@ -65,7 +65,7 @@ __all__ = ["continuity_outliers", "reject_discontinuous", "DEFAULT_CONTINUITY_K"
            "DEFAULT_CONTINUITY_WINDOW_DEG", "DEFAULT_CONTINUITY_FLOOR_MM", "fading_points",
            "section_profile", "notch_depth", "reject_spurious", "rejection_counts",
            "REJECTION_CODES", "DEFAULT_FADE_MARGIN_MM", "DEFAULT_FADE_GAP_MM",
-           "convex_gaps", "axial_slopes", "reject_scan", "ProfileGeometry", "DEFAULT_SHORT_GAP_MM",
+           "convex_gaps", "axial_slopes", "reject_scan", "mark_hidden", "ProfileGeometry", "DEFAULT_SHORT_GAP_MM",
            "DEFAULT_SHORT_MARGIN_MM",
            "DEFAULT_NOTCH_DEPTH_MM", "DEFAULT_NOTCH_SCALES_MM"]
 
@@ -98,7 +98,8 @@ DEFAULT_NOTCH_ROUND_TOL_MM = 0.1
 _PROFILE_HALF = 5
 #: Truth-free rejections, by the name ``lts360 score`` and the cloud's header give them.
 REJECTION_CODES = {"continuity": Quality.DISCONTINUOUS, "fading": Quality.FADING,
-                   "notch": Quality.NOTCH, "truncated": Quality.TRUNCATED,
+                   "notch": Quality.NOTCH, "hidden": Quality.HIDDEN,
+                   "truncated": Quality.TRUNCATED,
                    "saturated_plateau": Quality.SATURATED_PLATEAU}
 
 
@@ -541,6 +542,25 @@ def reject_scan(results, z_mm, *, frames=None, continuity_k: float | None = None
         r = reject_spurious(res, axial_slope=sl, **kwargs)
         out.append(r if continuity_k is None else reject_discontinuous(r, k=continuity_k))
     return out
+
+
+def mark_hidden(result: InverseResult, hidden: dict) -> InverseResult:
+    """The result with each view's valid points in ``hidden`` (view name → (nθ,) bool: θ its
+    first-pass profile hides from the view, :func:`lts360.recon.triangulation.band.hidden_rows`)
+    flagged ``HIDDEN`` and invalid: the line found there is another surface's.  Being invalid
+    inside the window, hidden rows count as faded for :func:`fading_points`: the line's last
+    points before them are judged as before any stretch where it faded."""
+    views = {}
+    for name, v in result.views.items():
+        m = hidden.get(name)
+        if m is None or not np.any(m):
+            views[name] = v
+            continue
+        m = np.asarray(m, bool) & v.window & v.valid
+        q = v.quality.copy()
+        q[m] = Quality.HIDDEN
+        views[name] = dataclasses.replace(v, r_mm=np.where(m, np.nan, v.r_mm), quality=q)
+    return dataclasses.replace(result, views=views)
 
 
 def rejection_counts(quality) -> dict[str, int]:
