@@ -68,7 +68,10 @@ def test_rejection_counts_name_every_code():
     q = np.array([Quality.NOTCH, Quality.NOTCH, Quality.FADING, Quality.FOUND,
                   Quality.DISCONTINUOUS, Quality.TRUNCATED, Quality.HIDDEN], np.uint8)
     assert rejection_counts(q) == {"continuity": 1, "fading": 1, "notch": 2, "hidden": 1,
-                                   "truncated": 1, "saturated_plateau": 0}
+                                   "flank": 0, "truncated": 1, "saturated_plateau": 0}
+    assert rejection_counts(np.array([Quality.FLANK] * 3, np.uint8))["flank"] == 3
+    # the codes are stored in files: appended, never renumbered
+    assert (Quality.HIDDEN, Quality.FLANK) == (10, 11)
 
 
 def test_bad_arguments():
@@ -261,3 +264,84 @@ def test_in_a_scan_a_round_sections_shallow_notch_is_kept_and_a_valley_is_not():
     assert notches(reject_scan(shallow, zs)) == [0, 0, 0]
     deep = [section(0.3)] * 3
     assert all(n > 0 for n in notches(reject_scan(deep, zs)))
+
+
+def _scan_section(th, r):
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.inverse import InverseResult, ViewResult
+    from lts360.recon.triangulation.peaks import Quality
+
+    grid = CylGrid.from_ranges((8.0, 14.0), theta_step_deg=np.degrees(th[1] - th[0]),
+                               r_step_mm=0.005)
+    r = np.broadcast_to(np.asarray(r, float), grid.theta_rad.shape).copy()
+    v = ViewResult("direct", grid.theta_rad, r, r, np.full(r.size, Quality.FOUND, np.uint8),
+                   np.ones(r.size), np.ones(r.size, bool), np.zeros(2))
+    return InverseResult(grid, {"direct": v}, "centroid", 25.5, 255.0, False)
+
+
+def _flank(results):
+    from lts360.recon.triangulation.peaks import Quality
+
+    return [int(np.sum(r.views["direct"].quality == Quality.FLANK)) for r in results]
+
+
+def test_a_section_on_a_shoulder_is_a_flank_and_its_neighbours_are_not():
+    """A 45° shoulder between Ø22 and Ø24 mm, sections 0.5 mm apart: the section on it differs
+    from both neighbours by slope 1 and is FLANK whole; the sections beside it differ from one
+    neighbour only; the scan's end sections have one neighbour and are never judged."""
+    from lts360.recon.triangulation.reject import flank_slopes, reject_scan
+
+    th = np.radians(np.arange(-180.0, 180.0, 0.2))
+    res = [_scan_section(th, r) for r in (11.0, 11.0, 11.5, 12.0, 12.0)]
+    zs = [0.0, 0.5, 1.0, 1.5, 2.0]
+    fl = flank_slopes(res, zs)
+    assert np.isnan(fl[0]).all() and np.isnan(fl[-1]).all()
+    assert np.allclose(fl[2], 1.0) and np.allclose(fl[1], 0.0) and np.allclose(fl[3], 0.0)
+    assert _flank(reject_scan(res, zs)) == [0, 0, th.size, 0, 0]
+    # a gentle taper (slope 0.1, a 6° cone) is measured, not flagged
+    taper = [_scan_section(th, 11.0 + 0.05 * k) for k in range(5)]
+    assert _flank(reject_scan(taper, zs)) == [0] * 5
+    # the criterion off
+    assert _flank(reject_scan(res, zs, max_flank_slope=None)) == [0] * 5
+
+
+def test_a_bump_narrower_than_the_stated_arc_is_not_a_flank():
+    """A 1° bump 0.3 mm high in the middle section only (a noisy valley of a cable): its slope
+    to both neighbours is 0.6, but over less than 2 mm of arc."""
+    from lts360.recon.triangulation.reject import reject_scan
+
+    th = np.radians(np.arange(-180.0, 180.0, 0.2))
+    bump = 11.0 + 0.3 * (np.abs(np.degrees(th) - 30.0) < 0.5)
+    res = [_scan_section(th, 11.0), _scan_section(th, bump), _scan_section(th, 11.0)]
+    assert _flank(reject_scan(res, [0.0, 0.5, 1.0])) == [0, 0, 0]
+    wide = 11.0 + 0.3 * (np.abs(np.degrees(th) - 30.0) < 10.0)  # 3.8 mm of arc
+    res[1] = _scan_section(th, wide)
+    assert _flank(reject_scan(res, [0.0, 0.5, 1.0]))[1] > 0
+
+
+def test_a_helix_turns_between_sections_and_is_not_a_flank():
+    """Six strands laid at 4°/mm, sections 0.34 mm apart: :func:`screw_rate` finds the lay
+    within one θ step per pair, and along the helix the profile does not change, so no
+    section is FLANK; compared straight along the axis the strands' flanks would be."""
+    from lts360.recon.triangulation.reject import _side_slopes, reject_scan, screw_rate
+
+    th = np.radians(np.arange(-180.0, 180.0, 0.2))
+    rate = np.radians(4.0)  # rad/mm
+    zs = [0.34 * k for k in range(6)]
+    res = [_scan_section(th, 10.0 + 0.5 * np.cos(6 * (th - rate * z))) for z in zs]
+    assert abs(screw_rate(res, zs) - rate) <= np.radians(0.2) / 0.34
+    assert _flank(reject_scan(res, zs)) == [0] * 6
+    straight = _side_slopes(res, zs)[2].min(axis=0)
+    assert straight.max() > 0.15  # the test would fail without the screw
+
+
+def test_a_round_scan_has_no_screw():
+    """A surface of revolution aligns equally at every shift: the smallest turn, 0; sections in different frames are not paired."""
+    from lts360.recon.triangulation.reject import reject_scan, screw_rate
+
+    th = np.radians(np.arange(-180.0, 180.0, 0.2))
+    res = [_scan_section(th, 11.0 + 1e-4 * k) for k in range(4)]
+    zs = [0.0, 0.5, 1.0, 1.5]
+    assert screw_rate(res, zs) == 0.0
+    assert _flank(reject_scan(res, zs)) == [0] * 4
+    assert screw_rate(res, zs, frames=[(0, 0), (1, 0), (2, 0), (3, 0)]) == 0.0

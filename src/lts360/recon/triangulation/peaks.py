@@ -94,6 +94,11 @@ class Quality(IntEnum):
     #: first-pass profile itself crosses the path from this θ to the view's (virtual) camera
     #: (a strand's flank behind its neighbour); what the line shows there is another surface.
     HIDDEN = 10
+    #: Set by :mod:`lts360.recon.triangulation.reject` in a scan: the section's profile differs
+    #: from both neighbouring sections' by more than a stated axial slope here, so the sheet
+    #: lies on a flank that turns along the axis (a groove's or a shoulder's) and its stripe
+    #: averages radii the section does not hold.
+    FLANK = 11
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,4 +1,5 @@
-"""Truth-free rejection of spurious points: continuity along θ, fading lines and notches.
+"""Truth-free rejection of spurious points: continuity along θ, fading lines, notches and
+flanks along the axis.
 
 A point whose radius lies off a robust local fit of its own view's profile ``r(θ)`` by more
 than ``k·σ`` is flagged ``DISCONTINUOUS`` and dropped from the valid points.  The local fit is
@@ -44,7 +45,19 @@ from the measurement alone:
     points.  In a scan, no notch is called where the profile stays within
     ``notch_round_tol_mm`` of the section's least-squares circle: there a "notch" is a glint's
     structured error or noise (the alu pipe's 159 NOTCH points → 33), while a cable's valleys
-    lie farther off the circle.
+    lie farther off the circle; behind that test a scan calls a notch from
+    60 µm (:data:`DEFAULT_SCAN_NOTCH_DEPTH_MM`; one frame: 80 µm).
+``FLANK``
+    In a scan only: a valid point whose section's profile differs from *both* neighbouring
+    sections' by an axial slope ``|dr/dz|`` above ``max_flank_slope`` over at least
+    ``min_flank_arc_mm`` of arc.  The section lies on a flank that turns along the axis (a
+    groove's or a shoulder's side): the sheet spans a radial range there that the section does
+    not hold, and the stripe's centre is not the surface in the plane (measured: the undercut
+    shaft's section on its groove's 45° flank reads −39 µm over its whole turn, 781 of its 806
+    spurious points).  A section beside a flank differs from one neighbour only and is kept;
+    so are a scan's end sections.  The neighbours' profiles are first turned back by the
+    scan's screw rate (:func:`screw_rate`), so that a cable's strands or a helical groove,
+    which turn between sections, are compared along the helix, where they do not change.
 
 Agreement between views is not used as a criterion: on rendered round objects the views'
 radii where they overlap (grazing points at the windows' ends) differ by up to 80 µm
@@ -65,9 +78,9 @@ __all__ = ["continuity_outliers", "reject_discontinuous", "DEFAULT_CONTINUITY_K"
            "DEFAULT_CONTINUITY_WINDOW_DEG", "DEFAULT_CONTINUITY_FLOOR_MM", "fading_points",
            "section_profile", "notch_depth", "reject_spurious", "rejection_counts",
            "REJECTION_CODES", "DEFAULT_FADE_MARGIN_MM", "DEFAULT_FADE_GAP_MM",
-           "convex_gaps", "axial_slopes", "reject_scan", "mark_hidden", "ProfileGeometry", "DEFAULT_SHORT_GAP_MM",
+           "convex_gaps", "axial_slopes", "flank_slopes", "screw_rate", "DEFAULT_MAX_FLANK_SLOPE", "reject_scan", "mark_hidden", "ProfileGeometry", "DEFAULT_SHORT_GAP_MM",
            "DEFAULT_SHORT_MARGIN_MM",
-           "DEFAULT_NOTCH_DEPTH_MM", "DEFAULT_NOTCH_SCALES_MM"]
+           "DEFAULT_NOTCH_DEPTH_MM", "DEFAULT_SCAN_NOTCH_DEPTH_MM", "DEFAULT_NOTCH_SCALES_MM"]
 
 DEFAULT_CONTINUITY_K = 6.0
 DEFAULT_CONTINUITY_WINDOW_DEG = 2.0
@@ -94,11 +107,21 @@ DEFAULT_NOTCH_SCALES_MM = (0.5, 1.0)
 #: In a scan, no notch where the profile is within this of the section's circle (a round
 #: section's glints and noise; a cable's valleys lie farther off it).
 DEFAULT_NOTCH_ROUND_TOL_MM = 0.1
+#: In a scan, where that test keeps round sections out, a shallower notch is called.
+DEFAULT_SCAN_NOTCH_DEPTH_MM = 0.06
+#: In a scan, a section whose profile differs from both neighbours' by more than this axial
+#: slope ``|dr/dz|`` lies on a flank (``FLANK``).
+DEFAULT_MAX_FLANK_SLOPE = 0.15
+#: ... over a stretch of at least this arc (a cable's noisy valleys differ from their
+#: neighbours' over 1–2°; a groove's or a shoulder's flank over much of the turn).
+DEFAULT_MIN_FLANK_ARC_MM = 2.0
+#: The largest turn of the profile between neighbouring sections that :func:`screw_rate` seeks.
+DEFAULT_MAX_SCREW_SHIFT_DEG = 10.0
 #: Samples each side of the profile's running median and mean.
 _PROFILE_HALF = 5
 #: Truth-free rejections, by the name ``lts360 score`` and the cloud's header give them.
 REJECTION_CODES = {"continuity": Quality.DISCONTINUOUS, "fading": Quality.FADING,
-                   "notch": Quality.NOTCH, "hidden": Quality.HIDDEN,
+                   "notch": Quality.NOTCH, "hidden": Quality.HIDDEN, "flank": Quality.FLANK,
                    "truncated": Quality.TRUNCATED,
                    "saturated_plateau": Quality.SATURATED_PLATEAU}
 
@@ -444,9 +467,16 @@ def reject_spurious(result: InverseResult, *, fade_margin_mm: float = DEFAULT_FA
                     round_tol_mm: float = DEFAULT_ROUND_TOL_MM,
                     short_gap_mm: float = DEFAULT_SHORT_GAP_MM,
                     short_margin_mm: float = DEFAULT_SHORT_MARGIN_MM,
-                    notch_round_tol_mm: float = DEFAULT_NOTCH_ROUND_TOL_MM) -> InverseResult:
+                    notch_round_tol_mm: float = DEFAULT_NOTCH_ROUND_TOL_MM,
+                    flank_slope=None,
+                    max_flank_slope: float | None = DEFAULT_MAX_FLANK_SLOPE,
+                    min_flank_arc_mm: float = DEFAULT_MIN_FLANK_ARC_MM) -> InverseResult:
     """The result with fading points flagged ``FADING`` and points in a notch ``NOTCH`` (see
     the module docstring), both dropped from the valid points.
+
+    ``flank_slope`` (nθ,): the section's ``|dr/dz|`` to both neighbours
+    (:func:`flank_slopes`); its stretches above ``max_flank_slope`` of at least
+    ``min_flank_arc_mm`` are flagged ``FLANK`` (``max_flank_slope = None``: off).
 
     ``fade_margin_mm = 0`` or ``notch_depth_mm = None`` turns a criterion off.  Both are
     decided on the points as measured (before either rejects anything); a point both would
@@ -470,10 +500,19 @@ def reject_spurious(result: InverseResult, *, fade_margin_mm: float = DEFAULT_FA
         depth = notch_depth(grid.theta_rad, prof, scales_mm=notch_scales_mm, periodic=periodic)
     scan = axial_slope is not None and bool(np.isfinite(np.asarray(axial_slope, float)).any())
     geo = ProfileGeometry.of(grid.theta_rad, prof, periodic=periodic) if scan else None
+    flank = None
+    if flank_slope is not None and max_flank_slope is not None:
+        if not max_flank_slope > 0:
+            raise ValueError(f"max_flank_slope must be > 0 or None, got {max_flank_slope}")
+        flank = _long_runs(np.asarray(flank_slope, float) > max_flank_slope,  # NaN: kept
+                           int(np.ceil(min_flank_arc_mm / (np.nanmedian(prof) * step)))
+                           if np.isfinite(prof).any() else flank_slope.size + 1, periodic)
     views = {}
     for name, v in result.views.items():
         q = v.quality.copy()
         valid = v.valid
+        if flank is not None:
+            q[valid & flank] = Quality.FLANK
         if depth is not None:
             notch = depth > notch_depth_mm
             if geo is not None:  # a scan: a round section's shallow notch is noise or glint
@@ -492,9 +531,81 @@ def reject_spurious(result: InverseResult, *, fade_margin_mm: float = DEFAULT_FA
                                  # can be told apart (a scan: the axial slope is known)
                                  short_margin_mm=short_margin_mm if geo is not None else 0.0)
             q[fade] = Quality.FADING
-        out = valid & ((q == Quality.NOTCH) | (q == Quality.FADING))
+        out = valid & ((q == Quality.NOTCH) | (q == Quality.FADING) | (q == Quality.FLANK))
         views[name] = dataclasses.replace(v, r_mm=np.where(out, np.nan, v.r_mm), quality=q)
     return dataclasses.replace(result, views=views)
+
+
+def _scan_profiles(results) -> list:
+    """Each section's profile (:func:`section_profile`), its gaps bridged along θ."""
+    profs = []
+    for res in results:
+        g = res.grid
+        p = section_profile(g.theta_rad, [v.r_mm for v in res.views.values()],
+                            periodic=g.is_full_turn)
+        ok = np.isfinite(p)
+        profs.append(np.interp(g.theta_rad, g.theta_rad[ok], p[ok],
+                               period=2 * np.pi if g.is_full_turn else None)
+                     if ok.sum() >= 3 else np.full(g.n_theta, np.nan))
+    return profs
+
+
+def _comparable(results, zs, keys, profs, k: int, j: int) -> bool:
+    return 0 <= j < len(results) and keys[j] == keys[k] and zs[j] != zs[k] \
+        and profs[j].size == profs[k].size and bool(np.isfinite(profs[j]).all()) \
+        and bool(np.isfinite(profs[k]).all()) \
+        and np.allclose(results[j].grid.theta_rad, results[k].grid.theta_rad)
+
+
+def screw_rate(results, z_mm, *, frames=None,
+               max_shift_deg: float = DEFAULT_MAX_SCREW_SHIFT_DEG) -> float:
+    """rad/mm: how fast the sections' profiles turn about the axis along the scan (a cable's
+    lay, a helical groove's lead), 0 for a surface of revolution or a prism.
+
+    For each pair of neighbouring sections (full turns, same frame), the shift of θ within
+    ``±max_shift_deg`` that best aligns the later profile with the earlier one (least mean
+    absolute difference about their median difference); the scan's rate is the median of the
+    pairs' shift per mm.  A round profile aligns equally at every shift: its pairs' shifts are
+    noise about 0 and move a round neighbour by nothing that matters."""
+    zs = [float(z) for z in z_mm]
+    keys = list(frames) if frames is not None else [None] * len(results)
+    profs = _scan_profiles(results)
+    rates = []
+    for k in range(len(results) - 1):
+        g = results[k].grid
+        if not g.is_full_turn or not _comparable(results, zs, keys, profs, k, k + 1):
+            continue
+        m = int(round(np.radians(max_shift_deg) / g.theta_step_rad))
+        a, b = profs[k], profs[k + 1]
+        shifts = np.arange(-m, m + 1)
+        cost = np.array([np.mean(np.abs(d - np.median(d)))
+                         for d in (b - np.roll(a, sh) for sh in shifts)])
+        sh = int(shifts[np.lexsort((np.abs(shifts), cost))[0]])  # a tie: the smallest turn
+        rates.append(sh * g.theta_step_rad / (zs[k + 1] - zs[k]))
+    return float(np.median(rates)) if rates else 0.0
+
+
+def _side_slopes(results, z_mm, frames=None, *, screw: float = 0.0) -> list:
+    """Per section, the ``|dr/dz|`` per θ to each neighbour it can be compared with: a
+    (sides, nθ) array (0–2 rows).  ``screw`` (rad/mm, :func:`screw_rate`): the neighbour's
+    profile is first turned back by ``screw·Δz`` (the slope along the helix)."""
+    zs = [float(z) for z in z_mm]
+    keys = list(frames) if frames is not None else [None] * len(results)
+    profs = _scan_profiles(results)
+    out = []
+    for k, res in enumerate(results):
+        sides = []
+        th = res.grid.theta_rad
+        for j in (k - 1, k + 1):
+            if not _comparable(results, zs, keys, profs, k, j):
+                continue
+            pj = profs[j]
+            if screw and res.grid.is_full_turn:
+                # r_j(θ) ≈ r_k(θ − screw·(z_j − z_k)): sample r_j at θ + screw·(z_j − z_k)
+                pj = np.interp(th + screw * (zs[j] - zs[k]), th, pj, period=2 * np.pi)
+            sides.append(np.abs(pj - profs[k]) / abs(zs[j] - zs[k]))
+        out.append(np.array(sides).reshape(len(sides), res.grid.n_theta))
+    return out
 
 
 def axial_slopes(results, z_mm, *, frames=None) -> list:
@@ -505,28 +616,40 @@ def axial_slopes(results, z_mm, *, frames=None) -> list:
     ``z_mm``: their stage heights; ``frames``: an optional key per section (the centre it was
     measured about): sections in different frames, or on different θ grids, are not compared.
     """
-    zs = [float(z) for z in z_mm]
-    keys = list(frames) if frames is not None else [None] * len(results)
-    profs = []
-    for res in results:
-        g = res.grid
-        p = section_profile(g.theta_rad, [v.r_mm for v in res.views.values()],
-                            periodic=g.is_full_turn)
-        ok = np.isfinite(p)
-        profs.append(np.interp(g.theta_rad, g.theta_rad[ok], p[ok],
-                               period=2 * np.pi if g.is_full_turn else None)
-                     if ok.sum() >= 3 else np.full(g.n_theta, np.nan))
-    out = []
-    for k, res in enumerate(results):
-        best = np.full(res.grid.n_theta, np.nan)
-        for j in (k - 1, k + 1):
-            if not (0 <= j < len(results)) or keys[j] != keys[k] or zs[j] == zs[k] \
-                    or profs[j].size != profs[k].size \
-                    or not np.allclose(results[j].grid.theta_rad, res.grid.theta_rad):
-                continue
-            s = np.abs(profs[j] - profs[k]) / abs(zs[j] - zs[k])
-            best = np.fmax(best, s)
-        out.append(best)
+    return [_fmax_rows(s) for s in _side_slopes(results, z_mm, frames)]
+
+
+def flank_slopes(results, z_mm, *, frames=None) -> list:
+    """Per section, ``|dr/dz|`` per θ to *both* neighbours (the smaller of the two sides; NaN
+    where a side is unknown, so never at a scan's ends): large where the section lies on a
+    flank that turns along the axis, not next to one (:data:`Quality.FLANK`).  Arguments as
+    :func:`axial_slopes`."""
+    screw = screw_rate(results, z_mm, frames=frames)
+    return [np.min(s, axis=0) if s.shape[0] == 2 else np.full(s.shape[1], np.nan)
+            for s in _side_slopes(results, z_mm, frames, screw=screw)]
+
+
+def _long_runs(mask: np.ndarray, n_min: int, periodic: bool) -> np.ndarray:
+    """The samples of ``mask`` in runs of at least ``n_min`` (a periodic run may wrap)."""
+    from scipy.ndimage import label
+
+    n = mask.size
+    if not mask.any():
+        return mask
+    if periodic and mask.all():
+        return mask if n >= n_min else np.zeros(n, bool)
+    tiled = np.concatenate([mask, mask, mask]) if periodic else mask
+    lab, _ = label(tiled)
+    size = np.bincount(lab.ravel())
+    size[0] = 0
+    keep = size[lab] >= n_min
+    return keep[n:2 * n] if periodic else keep
+
+
+def _fmax_rows(a: np.ndarray) -> np.ndarray:
+    out = np.full(a.shape[1], np.nan)
+    for row in a:
+        out = np.fmax(out, row)
     return out
 
 
@@ -535,11 +658,15 @@ def reject_scan(results, z_mm, *, frames=None, continuity_k: float | None = None
     """:func:`reject_spurious` (then :func:`reject_discontinuous` with ``continuity_k``) on
     every section of a scan, with each section's axial slope from its neighbours
     (:func:`axial_slopes`), so that a faded stretch on a convex, axially straight surface is
-    kept (:func:`convex_gaps`)."""
+    kept (:func:`convex_gaps`), and its slope to both neighbours (:func:`flank_slopes`), so
+    that a section on a flank is flagged ``FLANK``.  ``notch_depth_mm`` defaults to
+    :data:`DEFAULT_SCAN_NOTCH_DEPTH_MM` here (a scan keeps round sections out of ``NOTCH``)."""
     slopes = axial_slopes(results, z_mm, frames=frames)
+    flanks = flank_slopes(results, z_mm, frames=frames)
     out = []
-    for res, sl in zip(results, slopes):
-        r = reject_spurious(res, axial_slope=sl, **kwargs)
+    kwargs.setdefault("notch_depth_mm", DEFAULT_SCAN_NOTCH_DEPTH_MM)
+    for res, sl, fl in zip(results, slopes, flanks):
+        r = reject_spurious(res, axial_slope=sl, flank_slope=fl, **kwargs)
         out.append(r if continuity_k is None else reject_discontinuous(r, k=continuity_k))
     return out
 
