@@ -558,7 +558,7 @@ def _comparable(results, zs, keys, profs, k: int, j: int) -> bool:
 
 
 def screw_rate(results, z_mm, *, frames=None,
-               max_shift_deg: float = DEFAULT_MAX_SCREW_SHIFT_DEG) -> float:
+               max_shift_deg: float = DEFAULT_MAX_SCREW_SHIFT_DEG, _profiles=None) -> float:
     """rad/mm: how fast the sections' profiles turn about the axis along the scan (a cable's
     lay, a helical groove's lead), 0 for a surface of revolution or a prism.
 
@@ -569,7 +569,7 @@ def screw_rate(results, z_mm, *, frames=None,
     noise about 0 and move a round neighbour by nothing that matters."""
     zs = [float(z) for z in z_mm]
     keys = list(frames) if frames is not None else [None] * len(results)
-    profs = _scan_profiles(results)
+    profs = _scan_profiles(results) if _profiles is None else _profiles
     rates = []
     for k in range(len(results) - 1):
         g = results[k].grid
@@ -585,13 +585,13 @@ def screw_rate(results, z_mm, *, frames=None,
     return float(np.median(rates)) if rates else 0.0
 
 
-def _side_slopes(results, z_mm, frames=None, *, screw: float = 0.0) -> list:
+def _side_slopes(results, z_mm, frames=None, *, screw: float = 0.0, _profiles=None) -> list:
     """Per section, the ``|dr/dz|`` per θ to each neighbour it can be compared with: a
     (sides, nθ) array (0–2 rows).  ``screw`` (rad/mm, :func:`screw_rate`): the neighbour's
     profile is first turned back by ``screw·Δz`` (the slope along the helix)."""
     zs = [float(z) for z in z_mm]
     keys = list(frames) if frames is not None else [None] * len(results)
-    profs = _scan_profiles(results)
+    profs = _scan_profiles(results) if _profiles is None else _profiles
     out = []
     for k, res in enumerate(results):
         sides = []
@@ -608,7 +608,7 @@ def _side_slopes(results, z_mm, frames=None, *, screw: float = 0.0) -> list:
     return out
 
 
-def axial_slopes(results, z_mm, *, frames=None) -> list:
+def axial_slopes(results, z_mm, *, frames=None, _profiles=None) -> list:
     """Per section, ``|dr/dz|`` per θ between its profile and its neighbours' (the larger of
     the two sides; NaN where unknown): the surface's slope along the axis, from the scan.
 
@@ -616,17 +616,18 @@ def axial_slopes(results, z_mm, *, frames=None) -> list:
     ``z_mm``: their stage heights; ``frames``: an optional key per section (the centre it was
     measured about): sections in different frames, or on different θ grids, are not compared.
     """
-    return [_fmax_rows(s) for s in _side_slopes(results, z_mm, frames)]
+    return [_fmax_rows(s) for s in _side_slopes(results, z_mm, frames, _profiles=_profiles)]
 
 
-def flank_slopes(results, z_mm, *, frames=None) -> list:
+def flank_slopes(results, z_mm, *, frames=None, _profiles=None) -> list:
     """Per section, ``|dr/dz|`` per θ to *both* neighbours (the smaller of the two sides; NaN
     where a side is unknown, so never at a scan's ends): large where the section lies on a
     flank that turns along the axis, not next to one (:data:`Quality.FLANK`).  Arguments as
     :func:`axial_slopes`."""
-    screw = screw_rate(results, z_mm, frames=frames)
+    profs = _scan_profiles(results) if _profiles is None else _profiles
+    screw = screw_rate(results, z_mm, frames=frames, _profiles=profs)
     return [np.min(s, axis=0) if s.shape[0] == 2 else np.full(s.shape[1], np.nan)
-            for s in _side_slopes(results, z_mm, frames, screw=screw)]
+            for s in _side_slopes(results, z_mm, frames, screw=screw, _profiles=profs)]
 
 
 def _long_runs(mask: np.ndarray, n_min: int, periodic: bool) -> np.ndarray:
@@ -661,8 +662,9 @@ def reject_scan(results, z_mm, *, frames=None, continuity_k: float | None = None
     kept (:func:`convex_gaps`), and its slope to both neighbours (:func:`flank_slopes`), so
     that a section on a flank is flagged ``FLANK``.  ``notch_depth_mm`` defaults to
     :data:`DEFAULT_SCAN_NOTCH_DEPTH_MM` here (a scan keeps round sections out of ``NOTCH``)."""
-    slopes = axial_slopes(results, z_mm, frames=frames)
-    flanks = flank_slopes(results, z_mm, frames=frames)
+    profs = _scan_profiles(results)  # once for both
+    slopes = axial_slopes(results, z_mm, frames=frames, _profiles=profs)
+    flanks = flank_slopes(results, z_mm, frames=frames, _profiles=profs)
     out = []
     kwargs.setdefault("notch_depth_mm", DEFAULT_SCAN_NOTCH_DEPTH_MM)
     for res, sl, fl in zip(results, slopes, flanks):
