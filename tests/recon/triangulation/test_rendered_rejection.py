@@ -1,11 +1,13 @@
-"""The truth-free rejection (FADING, NOTCH) on one noise-free section per example object,
-measured as ``lts360 measure`` does (band found from the image, true calibration, 0.1° × 5 µm)
-and checked against the truth-aware spurious count of ``lts360 score``.
+"""The truth-free rejection (FADING, NOTCH, HIDDEN) on one noise-free section per example
+object, measured as ``lts360 measure`` does (band found from the image, true calibration,
+0.1° × 5 µm) and checked against the truth-aware spurious count of ``lts360 score``.
 
-Measured 2026-12-03 (valid points / rejected / spurious still valid): gauge 4406 / 0 / 0,
-PVC 4266 / 0 / 0, alu pipe 4386 / 0 / 0, undercut shaft 4358 / 0 / 0, cut tube 4330 / 0 / 0,
-cube 4131 / 141 / 0, grooved shaft 3230 / 307 / 9 (0.31 %), cable-8 4458 / 1249 / 8
-(0.25 %), cable-6 4484 / 1247 / 40 (1.24 %: above the 1 % target, see docs/reconstruction.md).
+Measured 2026-12-03, commit f3f1f21 (valid points / rejected FADING + NOTCH + HIDDEN /
+spurious still valid): gauge 4409 / 0 / 0, PVC 4292 / 0 / 0, alu pipe 4392 / 0 / 0, undercut
+shaft 4362 / 0 / 0, cut tube 4330 / 0 / 0, cube 3990 / 141 / 0, grooved shaft 2937 / 307 / 9
+(0.31 %), cable-8 2931 / 1627 / 8 (0.27 %), cable-6 2908 / 1725 / 0.  One frame has no
+neighbours: the scan-only criteria (the convex exemption, the narrow FADING tier, FLANK) are
+off here; the examples' scans are in STUDIES.md.
 """
 
 from __future__ import annotations
@@ -17,9 +19,8 @@ import pytest
 mi = pytest.importorskip("mitsuba", reason="rendering needs Mitsuba 3")
 
 ROUND = ("plug-gauge", "pvc-pipe", "alu-pipe")
-#: Largest share of the kept points still spurious (truth-aware); cable-6 misses the 1 %
-#: target by its measured 1.24 %.
-SPURIOUS_MAX = {"cable-6": 0.015}
+#: Largest share of the kept points still spurious (truth-aware): the 1 % target.
+SPURIOUS_MAX = 0.01
 
 
 @pytest.mark.slow
@@ -44,8 +45,8 @@ def test_rejection_fractions_on_a_noise_free_section(name, tmp_path):
     kept, _, _ = measure_sections_following([Section(tmp_path / "f" / "image.png", 0.0)], cal,
                                             reject=True)
     m = score_cloud(kept, obj, rig_truth=truth, use_mesh=False)
-    rejected = m["rejected"]["fading"] + m["rejected"]["notch"]
+    rejected = sum(m["rejected"][k] for k in ("fading", "notch", "hidden", "flank"))
     valid = m["n_points"] + m.get("n_spurious", 0)
-    assert m.get("n_spurious", 0) <= SPURIOUS_MAX.get(name, 0.01) * valid, m
+    assert m.get("n_spurious", 0) <= SPURIOUS_MAX * valid, m
     if name in ROUND:
         assert rejected <= 0.005 * (valid + rejected), m["rejected"]
