@@ -93,6 +93,7 @@ def examples_trial(trial: Trial) -> TrialOutput:
             "n_rejected_notch": m["rejected"]["notch"],
             "n_rejected_hidden": m["rejected"]["hidden"],
             "n_rejected_flank": m["rejected"]["flank"],
+            "n_rejected_neighbours": m["rejected"]["neighbours"],
             "spurious_rms_mm": (m.get("spurious") or {}).get("rms_mm") or 0.0,
             "n_band_searches": len(band_log.searched),
             "render_s_per_section": t_render / n, "measure_s_per_section": t_measure / n,
@@ -189,7 +190,8 @@ def run_examples_study(out_dir, *, objects=None, seed: int = 0, noise: str = "re
     for i, name in enumerate(ds["object"].values):
         keys = ("n_points", "coverage_deg", "rms_mm", "mean_mm", "p95_mm", "max_abs_mm",
                 "mesh_rms_mm", "mesh_mean_mm", "n_spurious", "n_rejected_fading",
-                "n_rejected_notch", "n_rejected_hidden", "n_rejected_flank", "spurious_rms_mm", "render_s_per_section",
+                "n_rejected_notch", "n_rejected_hidden", "n_rejected_flank", "n_rejected_neighbours",
+                "spurious_rms_mm", "render_s_per_section",
                 "measure_s_per_section")
         row = {k: float(ds[k].values[i]) if k in ds else float("nan") for k in keys}
         row.update(figure=int(ds["figure"].values[i]), sections=int(ds["sections"].values[i]),
@@ -205,7 +207,8 @@ def _rejected(row: dict) -> str:
     if f is None or n is None or not (np.isfinite(f) and np.isfinite(n)):
         return "—"  # a table from before the rejection
     out = f"{int(f)}/{int(n)}"
-    for key in ("n_rejected_hidden", "n_rejected_flank"):  # later criteria: older tables lack them
+    # the later criteria: older tables lack them
+    for key in ("n_rejected_hidden", "n_rejected_flank", "n_rejected_neighbours"):
         c = row.get(key)
         if c is None or not np.isfinite(c):
             break
@@ -216,16 +219,17 @@ def _rejected(row: dict) -> str:
 def format_examples(table: dict) -> str:
     lines = [f"{'object':16s} {'fig':>3s} {'sections':>8s} {'pitch':>6s} {'points':>8s} "
              f"{'coverage':>8s} {'rms µm':>7s} {'mean µm':>8s} {'p95 µm':>7s} {'max µm':>7s} "
-             f"{'normal rms':>10s} {'rejected f/n/h/s':>20s} {'spurious':>8s}"]
+             f"{'normal rms':>10s} {'rejected f/n/h/s/b':>24s} {'spurious':>8s}"]
     for name, r in table.items():
         lines.append(f"{name:16s} {r['figure']:3d} {r['sections']:8d} {r['pitch_mm']:6.2f} "
                      f"{int(r['n_points']):8d} {r['coverage_deg']:7.1f}° {r['rms_mm'] * 1e3:7.1f} "
                      f"{r['mean_mm'] * 1e3:+8.1f} {r['p95_mm'] * 1e3:7.1f} {r['max_abs_mm'] * 1e3:7.1f} "
                      f"{r['mesh_rms_mm'] * 1e3:10.1f} "
-                     f"{_rejected(r):>20s} {int(r['n_spurious']):8d}")
+                     f"{_rejected(r):>24s} {int(r['n_spurious']):8d}")
     lines.append("(coverage: mean angle per section with measurable points, 0.5° bins; errors: "
                  "analytic radial error r − r(θ, z), signed, positive outside; normal rms: "
-                 "distance to the mesh; rejected f/n/h/s: rows rejected without the truth as "
-                 "FADING / NOTCH / HIDDEN / FLANK (the sheet on a slope along the axis); spurious: points still valid where the true surface is hidden from "
+                 "distance to the mesh; rejected f/n/h/s/b: rows rejected without the truth as "
+                 "FADING / NOTCH / HIDDEN / FLANK (the sheet on a slope along the axis) / "
+                 "NEIGHBOURS (both neighbouring sections rejected it along the helix); spurious: points still valid where the true surface is hidden from "
                  "the view or unlit — left out of the errors and the coverage)")
     return "\n".join(lines)

@@ -161,4 +161,5 @@ def test_quality_codes_are_stable():
     assert [(q.name, int(q)) for q in Quality] == [
         ("FOUND", 0), ("NO_PEAK", 1), ("SATURATED", 2), ("SEVERAL_PEAKS", 3),
         ("OUTSIDE_WINDOW", 4), ("TRUNCATED", 5), ("SATURATED_PLATEAU", 6), ("DISCONTINUOUS", 7),
-        ("NOTCH", 8), ("FADING", 9), ("HIDDEN", 10), ("FLANK", 11)]
+        ("NOTCH", 8), ("FADING", 9), ("HIDDEN", 10), ("FLANK", 11),
+        ("NEIGHBOURS", 12)]

@@ -68,10 +68,11 @@ def test_rejection_counts_name_every_code():
     q = np.array([Quality.NOTCH, Quality.NOTCH, Quality.FADING, Quality.FOUND,
                   Quality.DISCONTINUOUS, Quality.TRUNCATED, Quality.HIDDEN], np.uint8)
     assert rejection_counts(q) == {"continuity": 1, "fading": 1, "notch": 2, "hidden": 1,
-                                   "flank": 0, "truncated": 1, "saturated_plateau": 0}
+                                   "flank": 0, "neighbours": 0, "truncated": 1,
+                                   "saturated_plateau": 0}
     assert rejection_counts(np.array([Quality.FLANK] * 3, np.uint8))["flank"] == 3
     # the codes are stored in files: appended, never renumbered
-    assert (Quality.HIDDEN, Quality.FLANK) == (10, 11)
+    assert (Quality.HIDDEN, Quality.FLANK, Quality.NEIGHBOURS) == (10, 11, 12)
 
 
 def test_bad_arguments():
@@ -345,3 +346,71 @@ def test_a_round_scan_has_no_screw():
     assert screw_rate(res, zs) == 0.0
     assert _flank(reject_scan(res, zs)) == [0] * 4
     assert screw_rate(res, zs, frames=[(0, 0), (1, 0), (2, 0), (3, 0)]) == 0.0
+
+
+def _strands_with_valley(th, z, rate, rejected_valley: bool):
+    """Six strands turned by ``rate``·z; the valley at 30° (turned with them) either rejected
+    (``NOTCH``, no radius) or measured 0.25 mm above its bottom (a bridge on the sheet's tail)."""
+    import dataclasses
+
+    from lts360.recon.triangulation.peaks import Quality
+
+    res = _scan_section(th, 10.0 + 0.5 * np.cos(6 * (th - rate * z)))
+    v = res.views["direct"]
+    d = np.degrees(np.angle(np.exp(1j * (th - rate * z - np.radians(30.0)))))
+    valley = np.abs(d) < 3.0
+    if rejected_valley:
+        q = np.where(valley, Quality.NOTCH, v.quality).astype(np.uint8)
+        r = np.where(valley, np.nan, v.r_mm)
+    else:
+        q, r = v.quality, np.where(valley, v.r_mm + 0.25, v.r_mm)
+    return dataclasses.replace(res, views={"direct": dataclasses.replace(v, r_mm=r, quality=q)})
+
+
+def test_a_valley_both_neighbours_rejected_along_the_helix_is_rejected_between_them():
+    from lts360.recon.triangulation.peaks import Quality
+    from lts360.recon.triangulation.reject import reject_like_neighbours
+
+    th = np.radians(np.arange(-180.0, 180.0, 0.2))
+    rate = np.radians(4.0)
+    zs = [0.0, 0.34, 0.68]
+    res = [_strands_with_valley(th, zs[0], rate, True), _strands_with_valley(th, zs[1], rate, False),
+           _strands_with_valley(th, zs[2], rate, True)]
+    out = reject_like_neighbours(res, zs, screw_rad_per_mm=rate)
+    q = out[1].views["direct"].quality
+    d = np.degrees(np.angle(np.exp(1j * (th - rate * zs[1] - np.radians(30.0)))))
+    assert np.all(q[np.abs(d) < 2.6] == Quality.NEIGHBOURS)  # the bridge, the whole valley
+    assert not np.any(q[np.abs(d) > 3.5] == Quality.NEIGHBOURS)
+    assert not np.any(out[1].views["direct"].valid & (q == Quality.NEIGHBOURS))
+    # the ends have one neighbour each and are left alone
+    assert out[0] is res[0] and out[2] is res[2]
+    # not turned back by the screw, the neighbours' valleys miss this one's by ±1.4°: less
+    assert np.sum(reject_like_neighbours(res, zs)[1].views["direct"].quality
+                  == Quality.NEIGHBOURS) < np.sum(q == Quality.NEIGHBOURS)
+    # one neighbour's rejection is not enough
+    res2 = [res[0], res[1], _strands_with_valley(th, zs[2], rate, False)]
+    assert not np.any(reject_like_neighbours(res2, zs, screw_rad_per_mm=rate)[1]
+                      .views["direct"].quality == Quality.NEIGHBOURS)
+
+
+def test_a_round_section_is_not_rejected_like_its_neighbours():
+    """A pipe's dim stretch recurs along the axis; where the section is round it stays."""
+    import dataclasses
+
+    from lts360.recon.triangulation.peaks import Quality
+    from lts360.recon.triangulation.reject import reject_like_neighbours
+
+    th = np.radians(np.arange(-180.0, 180.0, 0.2))
+    dim = np.abs(np.degrees(th) - 40.0) < 2.0
+
+    def section(faded):
+        res = _scan_section(th, 11.0)
+        v = res.views["direct"]
+        if faded:
+            v = dataclasses.replace(v, r_mm=np.where(dim, np.nan, v.r_mm),
+                                    quality=np.where(dim, Quality.FADING, v.quality).astype(np.uint8))
+        return dataclasses.replace(res, views={"direct": v})
+
+    res = [section(True), section(False), section(True)]
+    out = reject_like_neighbours(res, [0.0, 0.5, 1.0])
+    assert not np.any(out[1].views["direct"].quality == Quality.NEIGHBOURS)

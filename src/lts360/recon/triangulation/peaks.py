@@ -99,6 +99,10 @@ class Quality(IntEnum):
     #: lies on a flank that turns along the axis (a groove's or a shoulder's) and its stripe
     #: averages radii the section does not hold.
     FLANK = 11
+    #: Set by :mod:`lts360.recon.triangulation.reject` in a scan: both neighbouring sections,
+    #: turned back by the scan's screw rate, rejected this θ in this view, and the section is
+    #: not round here: along the helix it is the same valley, seen from the same camera.
+    NEIGHBOURS = 12
 
 
 @dataclass(frozen=True, eq=False)
