@@ -190,8 +190,8 @@ def run_examples_study(out_dir, *, objects=None, seed: int = 0, noise: str = "re
     for i, name in enumerate(ds["object"].values):
         keys = ("n_points", "coverage_deg", "rms_mm", "mean_mm", "p95_mm", "max_abs_mm",
                 "mesh_rms_mm", "mesh_mean_mm", "n_spurious", "n_rejected_fading",
-                "n_rejected_notch", "n_rejected_hidden", "n_rejected_flank", "n_rejected_neighbours",
-                "spurious_rms_mm", "render_s_per_section",
+                "n_rejected_notch", "n_rejected_hidden", "n_rejected_flank",
+                "n_rejected_neighbours", "spurious_rms_mm", "render_s_per_section",
                 "measure_s_per_section")
         row = {k: float(ds[k].values[i]) if k in ds else float("nan") for k in keys}
         row.update(figure=int(ds["figure"].values[i]), sections=int(ds["sections"].values[i]),

@@ -337,7 +337,8 @@ def test_a_helix_turns_between_sections_and_is_not_a_flank():
 
 
 def test_a_round_scan_has_no_screw():
-    """A surface of revolution aligns equally at every shift: the smallest turn, 0; sections in different frames are not paired."""
+    """A surface of revolution aligns equally at every shift: the smallest turn, 0; sections
+    in different frames are not paired."""
     from lts360.recon.triangulation.reject import reject_scan, screw_rate
 
     th = np.radians(np.arange(-180.0, 180.0, 0.2))
@@ -374,8 +375,8 @@ def test_a_valley_both_neighbours_rejected_along_the_helix_is_rejected_between_t
     th = np.radians(np.arange(-180.0, 180.0, 0.2))
     rate = np.radians(4.0)
     zs = [0.0, 0.34, 0.68]
-    res = [_strands_with_valley(th, zs[0], rate, True), _strands_with_valley(th, zs[1], rate, False),
-           _strands_with_valley(th, zs[2], rate, True)]
+    res = [_strands_with_valley(th, z, rate, rejected) for z, rejected
+           in zip(zs, (True, False, True))]
     out = reject_like_neighbours(res, zs, screw_rad_per_mm=rate)
     q = out[1].views["direct"].quality
     d = np.degrees(np.angle(np.exp(1j * (th - rate * zs[1] - np.radians(30.0)))))
@@ -407,8 +408,8 @@ def test_a_round_section_is_not_rejected_like_its_neighbours():
         res = _scan_section(th, 11.0)
         v = res.views["direct"]
         if faded:
-            v = dataclasses.replace(v, r_mm=np.where(dim, np.nan, v.r_mm),
-                                    quality=np.where(dim, Quality.FADING, v.quality).astype(np.uint8))
+            q = np.where(dim, Quality.FADING, v.quality).astype(np.uint8)
+            v = dataclasses.replace(v, r_mm=np.where(dim, np.nan, v.r_mm), quality=q)
         return dataclasses.replace(res, views={"direct": v})
 
     res = [section(True), section(False), section(True)]
