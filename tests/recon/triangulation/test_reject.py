@@ -306,6 +306,21 @@ def test_a_section_on_a_shoulder_is_a_flank_and_its_neighbours_are_not():
     assert _flank(reject_scan(res, zs, max_flank_slope=None)) == [0] * 5
 
 
+def test_a_cone_keeps_its_slope_and_is_not_a_flank():
+    """A 27° cone (slope 0.5) scanned over seven sections: every section differs from both
+    neighbours by slope 0.5, but the slope does not change from section to section, so the
+    sheet lies on a straight slope and measures it.  A groove's flank two sections long
+    between flat stretches is FLANK."""
+    from lts360.recon.triangulation.reject import reject_scan
+
+    th = np.radians(np.arange(-180.0, 180.0, 0.2))
+    zs = [0.5 * k for k in range(7)]
+    cone = [_scan_section(th, 10.0 + 0.5 * z) for z in zs]
+    assert _flank(reject_scan(cone, zs)) == [0] * 7
+    groove = [_scan_section(th, r) for r in (11.0, 11.0, 11.0, 11.3, 11.6, 11.6, 11.6)]
+    assert _flank(reject_scan(groove, zs)) == [0, 0, 0, th.size, 0, 0, 0]
+
+
 def test_a_bump_narrower_than_the_stated_arc_is_not_a_flank():
     """A 1° bump 0.3 mm high in the middle section only (a noisy valley of a cable): its slope
     to both neighbours is 0.6, but over less than 2 mm of arc."""

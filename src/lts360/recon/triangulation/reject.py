@@ -55,7 +55,9 @@ from the measurement alone:
     not hold, and the stripe's centre is not the surface in the plane (measured: the undercut
     shaft's section on its groove's 45° flank reads −39 µm over its whole turn, 781 of its 806
     spurious points).  A section beside a flank differs from one neighbour only and is kept;
-    so are a scan's end sections.  The neighbours' profiles are first turned back by the
+    so are a scan's end sections, and a cone, whose slope does not change from section to
+    section (only a flank short enough for the sheet to span its turn is flagged:
+    :func:`flank_slopes`).  The neighbours' profiles are first turned back by the
     scan's screw rate (:func:`screw_rate`), so that a cable's strands or a helical groove,
     which turn between sections, are compared along the helix, where they do not change.
 ``NEIGHBOURS``
@@ -631,16 +633,55 @@ def axial_slopes(results, z_mm, *, frames=None, _profiles=None) -> list:
     return [_fmax_rows(s) for s in _side_slopes(results, z_mm, frames, _profiles=_profiles)]
 
 
-def flank_slopes(results, z_mm, *, frames=None, _profiles=None, _screw=None) -> list:
+def flank_slopes(results, z_mm, *, frames=None, _profiles=None, _screw=None,
+                 min_change: float = DEFAULT_MAX_FLANK_SLOPE) -> list:
     """Per section, ``|dr/dz|`` per θ to *both* neighbours (the smaller of the two sides; NaN
-    where a side is unknown, so never at a scan's ends): large where the section lies on a
-    flank that turns along the axis, not next to one (:data:`Quality.FLANK`).  Arguments as
+    where a side is unknown, so never at a scan's ends) where the section lies on a *short*
+    flank (:data:`Quality.FLANK`), 0 elsewhere.
+
+    A flank is short where, on at least one side, the slope beyond the neighbour (between it
+    and the next section) differs from the slope to it by more than ``min_change``: the
+    surface turns along the axis within two pitches, as at a groove's or a shoulder's side,
+    and the sheet there may span the turn.  A cone keeps its slope from section to section
+    and is measured (the sheet's centre on a straight slope is the surface's); where neither
+    side's next section is known the flank counts as short.  Arguments as
     :func:`axial_slopes`."""
+    zs = [float(z) for z in z_mm]
+    keys = list(frames) if frames is not None else [None] * len(results)
     profs = _scan_profiles(results) if _profiles is None else _profiles
     screw = screw_rate(results, z_mm, frames=frames, _profiles=profs) if _screw is None \
         else _screw
-    return [np.min(s, axis=0) if s.shape[0] == 2 else np.full(s.shape[1], np.nan)
-            for s in _side_slopes(results, z_mm, frames, screw=screw, _profiles=profs)]
+    out = []
+    for k, res in enumerate(results):
+        n = res.grid.n_theta
+        th = res.grid.theta_rad
+        turn = bool(screw) and res.grid.is_full_turn
+
+        def aligned(j):
+            if not _comparable(results, zs, keys, profs, k, j):
+                return None
+            if not turn:
+                return profs[j]
+            # r_j(θ) ≈ r_k(θ − screw·(z_j − z_k)): sample r_j at θ + screw·Δz
+            return np.interp(th + screw * (zs[j] - zs[k]), th, profs[j], period=2 * np.pi)
+
+        inner, changes = [], []
+        for j, jj in ((k - 1, k - 2), (k + 1, k + 2)):
+            pj = aligned(j)
+            if pj is None:
+                break
+            s_in = (profs[k] - pj) / (zs[k] - zs[j])
+            inner.append(np.abs(s_in))
+            pjj = aligned(jj) if _comparable(results, zs, keys, profs, j, jj) else None
+            if pjj is not None:
+                changes.append(np.abs(s_in - (pj - pjj) / (zs[j] - zs[jj])))
+        if len(inner) < 2:
+            out.append(np.full(n, np.nan))
+            continue
+        short = np.any(np.array(changes) > min_change, axis=0) if changes \
+            else np.ones(n, bool)
+        out.append(np.where(short, np.minimum(inner[0], inner[1]), 0.0))
+    return out
 
 
 def _long_runs(mask: np.ndarray, n_min: int, periodic: bool) -> np.ndarray:
