@@ -599,6 +599,19 @@ def screw_rate(results, z_mm, *, frames=None,
     return float(np.median(rates)) if rates else 0.0
 
 
+def _aligned(profs, results, zs, keys, k: int, j: int, screw: float):
+    """Section ``j``'s profile on section ``k``'s θ, turned back by ``screw·(z_j − z_k)``
+    (the same surface along the helix), or None where the two cannot be compared."""
+    if not _comparable(results, zs, keys, profs, k, j):
+        return None
+    g = results[k].grid
+    if not screw or not g.is_full_turn:
+        return profs[j]
+    # r_j(θ) ≈ r_k(θ − screw·(z_j − z_k)): sample r_j at θ + screw·Δz
+    th = g.theta_rad
+    return np.interp(th + screw * (zs[j] - zs[k]), th, profs[j], period=2 * np.pi)
+
+
 def _side_slopes(results, z_mm, frames=None, *, screw: float = 0.0, _profiles=None) -> list:
     """Per section, the ``|dr/dz|`` per θ to each neighbour it can be compared with: a
     (sides, nθ) array (0–2 rows).  ``screw`` (rad/mm, :func:`screw_rate`): the neighbour's
@@ -609,15 +622,10 @@ def _side_slopes(results, z_mm, frames=None, *, screw: float = 0.0, _profiles=No
     out = []
     for k, res in enumerate(results):
         sides = []
-        th = res.grid.theta_rad
         for j in (k - 1, k + 1):
-            if not _comparable(results, zs, keys, profs, k, j):
-                continue
-            pj = profs[j]
-            if screw and res.grid.is_full_turn:
-                # r_j(θ) ≈ r_k(θ − screw·(z_j − z_k)): sample r_j at θ + screw·Δz
-                pj = np.interp(th + screw * (zs[j] - zs[k]), th, pj, period=2 * np.pi)
-            sides.append(np.abs(pj - profs[k]) / abs(zs[j] - zs[k]))
+            pj = _aligned(profs, results, zs, keys, k, j, screw)
+            if pj is not None:
+                sides.append(np.abs(pj - profs[k]) / abs(zs[j] - zs[k]))
         out.append(np.array(sides).reshape(len(sides), res.grid.n_theta))
     return out
 
@@ -654,25 +662,15 @@ def flank_slopes(results, z_mm, *, frames=None, _profiles=None, _screw=None,
     out = []
     for k, res in enumerate(results):
         n = res.grid.n_theta
-        th = res.grid.theta_rad
-        turn = bool(screw) and res.grid.is_full_turn
-
-        def aligned(j):
-            if not _comparable(results, zs, keys, profs, k, j):
-                return None
-            if not turn:
-                return profs[j]
-            # r_j(θ) ≈ r_k(θ − screw·(z_j − z_k)): sample r_j at θ + screw·Δz
-            return np.interp(th + screw * (zs[j] - zs[k]), th, profs[j], period=2 * np.pi)
-
         inner, changes = [], []
         for j, jj in ((k - 1, k - 2), (k + 1, k + 2)):
-            pj = aligned(j)
+            pj = _aligned(profs, results, zs, keys, k, j, screw)
             if pj is None:
                 break
             s_in = (profs[k] - pj) / (zs[k] - zs[j])
             inner.append(np.abs(s_in))
-            pjj = aligned(jj) if _comparable(results, zs, keys, profs, j, jj) else None
+            pjj = _aligned(profs, results, zs, keys, k, jj, screw) \
+                if _comparable(results, zs, keys, profs, j, jj) else None
             if pjj is not None:
                 changes.append(np.abs(s_in - (pj - pjj) / (zs[j] - zs[jj])))
         if len(inner) < 2:
