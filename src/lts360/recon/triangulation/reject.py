@@ -518,9 +518,10 @@ def reject_spurious(result: InverseResult, *, fade_margin_mm: float = DEFAULT_FA
     if flank_slope is not None and max_flank_slope is not None:
         if not max_flank_slope > 0:
             raise ValueError(f"max_flank_slope must be > 0 or None, got {max_flank_slope}")
-        flank = _long_runs(np.asarray(flank_slope, float) > max_flank_slope,  # NaN: kept
+        slope = np.asarray(flank_slope, float)
+        flank = _long_runs(slope > max_flank_slope,  # NaN: kept
                            int(np.ceil(min_flank_arc_mm / (np.nanmedian(prof) * step)))
-                           if np.isfinite(prof).any() else flank_slope.size + 1, periodic)
+                           if np.isfinite(prof).any() else slope.size + 1, periodic)
     views = {}
     for name, v in result.views.items():
         q = v.quality.copy()
