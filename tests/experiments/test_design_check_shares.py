@@ -69,7 +69,7 @@ def test_the_model_shares_are_computed_not_skipped():
     from lts360.scenes.rig_io import load_rig
 
     m = _model_shares(load_rig("paper"), 2.0, None, None)
-    assert "error" not in m, m["error"] if "error" in m else m
+    assert "error" not in m, m.get("error")
     assert m["noise_um"] == pytest.approx(1.81, rel=0.02)  # STUDIES.md: model 1.81 µm
     assert m["compensation_um"] == pytest.approx(5.75, rel=0.02)  # STUDIES.md: model 5.75 µm
     assert m["calibration_um"] is None  # no covariance given

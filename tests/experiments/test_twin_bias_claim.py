@@ -26,8 +26,8 @@ SPREAD_MAX_UM = 3.6
 def _trial(diameter_mm, placement_mm):
     from lts360.experiments.runner import plan_trials
 
-    params = [dict(diameter_mm=float(d), x_mm=float(x), y_mm=float(y), spp=64, twin_spp=64,
-                   noise="none", rig="paper", variant="")
+    params = [{"diameter_mm": float(d), "x_mm": float(x), "y_mm": float(y), "spp": 64,
+               "twin_spp": 64, "noise": "none", "rig": "paper", "variant": ""}
               for d in DIAMETERS_MM for x, y in PLACEMENTS_MM]
     i = DIAMETERS_MM.index(diameter_mm) * len(PLACEMENTS_MM) + PLACEMENTS_MM.index(placement_mm)
     return plan_trials(params, 0)[i]
