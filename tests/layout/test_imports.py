@@ -25,21 +25,67 @@ def _modules() -> dict[str, Path]:
     return out
 
 
+def _absolute(module: str, is_package: bool, node: ast.ImportFrom) -> str | None:
+    """The absolute module a ``from … import`` names: ``from ..x import y`` in ``a.b.c`` is
+    ``a.x`` (level 1 is the module's own package; a package's ``__init__`` is its own)."""
+    if node.level == 0:
+        return node.module
+    package = module.split(".") if is_package else module.split(".")[:-1]
+    if node.level - 1 > len(package) - 1:
+        return None  # beyond the top-level package: Python raises ImportError
+    base = package[:len(package) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def imports_in(module: str, is_package: bool, source: str, mods) -> set[str]:
+    """The lts360 modules that ``source`` (the text of ``module``) imports, relative imports
+    resolved (``from pkg import submodule`` names the submodule)."""
+    out = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.ImportFrom):
+            target = _absolute(module, is_package, node)
+            if target is None:
+                continue
+            subs = {f"{target}.{a.name}" for a in node.names} & mods
+            out |= subs
+            if len(subs) < len(node.names) and target in mods:
+                out.add(target)
+        elif isinstance(node, ast.Import):
+            out |= {a.name for a in node.names} & mods
+    return out
+
+
 @functools.lru_cache(maxsize=1)
 def import_graph() -> dict[str, frozenset[str]]:
-    """Module → the lts360 modules it imports (``from pkg import submodule`` names the submodule)."""
+    """Module → the lts360 modules it imports, absolute and relative."""
     mods = _modules()
-    graph = {m: set() for m in mods}
-    for m, p in mods.items():
-        for node in ast.walk(ast.parse(p.read_text())):
-            if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-                subs = {f"{node.module}.{a.name}" for a in node.names} & mods.keys()
-                graph[m] |= subs
-                if len(subs) < len(node.names) and node.module in mods:
-                    graph[m].add(node.module)
-            elif isinstance(node, ast.Import):
-                graph[m] |= {a.name for a in node.names} & mods.keys()
-    return {m: frozenset(ts) for m, ts in graph.items()}
+    return {m: frozenset(imports_in(m, p.name == "__init__.py", p.read_text(), mods.keys()))
+            for m, p in mods.items()}
+
+
+def test_relative_imports_are_resolved():
+    """A relative import names the same module as its absolute spelling, so it cannot slip past
+    a layer rule (a planted ``from ...simulator import frame`` in recon is seen)."""
+    mods = {"lts360", "lts360.recon", "lts360.recon.triangulation",
+            "lts360.recon.triangulation.inverse", "lts360.simulator", "lts360.simulator.frame",
+            "lts360.scenes", "lts360.scenes.objects"}
+    m = "lts360.recon.triangulation.inverse"
+    assert imports_in(m, False, "from ...simulator import frame", mods) == \
+        {"lts360.simulator.frame"}
+    assert imports_in(m, False, "from ...scenes.objects import build_object", mods) == \
+        {"lts360.scenes.objects"}
+    assert imports_in(m, False, "from . import inverse", mods) == \
+        {"lts360.recon.triangulation.inverse"}
+    assert imports_in(m, False, "from .. import triangulation", mods) == \
+        {"lts360.recon.triangulation"}
+    # in a package's __init__, level 1 is the package itself
+    assert imports_in("lts360.recon", True, "from ..simulator import frame", mods) == \
+        {"lts360.simulator.frame"}
+    assert imports_in("lts360.recon", True, "from .triangulation import inverse", mods) == \
+        {"lts360.recon.triangulation.inverse"}
+    # the same import written absolutely
+    assert imports_in(m, False, "from lts360.simulator import frame", mods) == \
+        {"lts360.simulator.frame"}
 
 
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:

@@ -60,8 +60,10 @@ def check_rig(rig, *, draws: int = 200, spp: int = 16, seed: int = 0) -> dict:
     space = DesignSpace.create(rig)
     out = {"rig": rig.name}
     for speckle in ("pixel", "dorsch"):
+        # no compensation: the simulation below measures with the true calibration, so the
+        # model's σ_R is the image's own share (Conditions compensates by default)
         e = evaluate(space, None, Conditions(diameters_mm=(GAUGE_DIAMETER_MM,), n_theta=360,
-                                             speckle=speckle), gradient=False)
+                                             speckle=speckle, compensate=False), gradient=False)
         out[f"model_{speckle}"] = {"sigma_R_um": float(e.sigma_R_um[0]),
                                    "point_rms_um": float(e.point_rms_um[0]),
                                    "speckle_rms_um": float(e.speckle_rms_um[0]),

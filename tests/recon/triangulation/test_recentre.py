@@ -96,4 +96,7 @@ def test_a_gauge_whose_section_misses_the_axis_is_measured_whole():
     m = score_cloud(cloud, obj, use_mesh=False)
     assert m["coverage_deg"] >= 0.97 * 360.0, m["coverage_deg"]
     assert all(v["n"] > 150 for v in m["views"].values()) and len(m["views"]) == 3
-    assert abs(m["radius_bias_mm"]) < 0.03, m["radius_bias_mm"]
+    # The line-centre bias of Ø6 mm at this sampling (measured 2026-12-04: −17.3 µm; at full
+    # size and 64 spp −12 µm, STUDIES.md); ±7 µm is room for the seeded 4-spp half-size
+    # render, not for a failed re-centring (STUDIES.md: points over −28…+20 µm about the axis).
+    assert -0.025 < m["radius_bias_mm"] < -0.010, m["radius_bias_mm"]
