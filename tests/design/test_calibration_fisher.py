@@ -267,7 +267,6 @@ def test_camera_covariance_matches_monte_carlo_of_zhang(rig_plan):
                             jac=lambda x: jac(x, model(x).ravel()), x_scale="jac")
         est.append(sol.x[:6])
     mc = np.cov(np.array(est).T)
-    print("camera σ MC / predicted:", np.sqrt(np.diag(mc) / np.diag(cov)))
     np.testing.assert_allclose(np.sqrt(np.diag(mc)), np.sqrt(np.diag(cov)), rtol=MC_RTOL)
     # The strongest correlations agree as well (fx–fy, k1–k2).
     corr = lambda c: c / np.sqrt(np.outer(np.diag(c), np.diag(c)))  # noqa: E731
@@ -309,7 +308,6 @@ def test_mirror_covariance_matches_monte_carlo_of_refine_mirror(rig_plan):
                           initial=MirrorEstimate(n, d, np.zeros(1)))
         est.append(plane_offset_abd(n, d, e.normal, e.d_mm))
     mc = np.cov(np.array(est).T)
-    print("mirror σ MC / predicted:", np.sqrt(np.diag(mc) / np.diag(cov)))
     np.testing.assert_allclose(np.sqrt(np.diag(mc)), np.sqrt(np.diag(cov)), rtol=MC_RTOL)
 
 
@@ -385,7 +383,6 @@ def test_laser_plane_covariance_matches_monte_carlo(rig_plan):
         e = fit_laser_plane(lines)
         est.append(plane_offset_abd(nL, dL, e.normal, e.d_mm))
     mc = np.cov(np.array(est).T)
-    print("laser σ MC / predicted:", np.sqrt(np.diag(mc) / np.diag(cov)))
     np.testing.assert_allclose(np.sqrt(np.diag(mc)), np.sqrt(np.diag(cov)), rtol=MC_RTOL)
 
 
