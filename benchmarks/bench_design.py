@@ -39,7 +39,7 @@ def main() -> None:
     from lts360.design.shares import CalibrationCovariance
 
     space = DesignSpace.create("paper")
-    from lts360.design.calibration import CalibrationPlan
+    from lts360.design.calib_covariance import CalibrationPlan
 
     if args.calibration == "plan":
         cal = CalibrationPlan.from_rig(space.base)

@@ -1,4 +1,4 @@
-"""The predicted calibration covariance (:mod:`lts360.design.calibration`): its hand-written
+"""The predicted calibration covariance (:mod:`lts360.design.calib_covariance`, :mod:`lts360.design.calib_fisher`): its hand-written
 Jacobians against central differences, its small-matrix algebra against numpy, and each
 stage's covariance against a brute-force Monte Carlo of the least-squares fit it models
 (the camera's with scipy, the mirror's and the laser plane's with the calibration's own
@@ -11,12 +11,16 @@ import pytest
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from lts360.design import calibration as C
+from lts360.design import backend as B
+from lts360.design import calib_covariance as C
+from lts360.design import calib_fisher as F
+from lts360.design import shares as SH
+from lts360.design import smallmat as SM
 from lts360.geometry.camera import backproject_pixels, project_camera_points
 from lts360.scenes.calib_plan import plan_calibration
 from lts360.scenes.rig_io import load_rig
 
-OPS = C.NUMPY_OPS
+OPS = B.NUMPY_OPS
 #: Intrinsics with a visible radial distortion, so that the k1, k2 columns are exercised.
 INTR = (1500.0, 1480.0, 641.0, 509.0, -0.12, 0.08)
 #: Central differences of smooth functions at these steps agree with the analytic Jacobian
@@ -82,7 +86,7 @@ def rig_plan():
 
 def test_projection_jacobians_match_central_differences(points):
     X = points
-    _, Ji, JX = C.project_jacobians(C._cols(X), INTR)
+    _, Ji, JX = F.project_jacobians(C._cols(X), INTR)
     Ji, JX = _np(Ji), _np(JX)
     for k in range(len(X)):
         num_i = _central(lambda p: _project(X[k:k + 1], p)[0], INTR,
@@ -93,7 +97,7 @@ def test_projection_jacobians_match_central_differences(points):
 
 
 def test_pose_jacobian_matches_rotation_vector_and_translation(points):
-    J = _np(C.pose_jacobian(C._cols(points)))
+    J = _np(F.pose_jacobian(C._cols(points)))
     for k, X in enumerate(points):
         num = _central(lambda q: _rodrigues(q[:3]) @ X + q[3:], np.zeros(6), 1e-6)
         np.testing.assert_allclose(J[k], num, rtol=FD_RTOL, atol=1e-6)
@@ -107,8 +111,8 @@ def _mirror():
 
 def test_reflection_jacobians_match_central_differences(points):
     n, d = _mirror()
-    e1, e2 = C.tangent_basis_np(n)
-    dX, dm = C.reflect_jacobians(C._cols(points), list(n), d, list(e1), list(e2))
+    e1, e2 = SH.tangent_basis_np(n)
+    dX, dm = F.reflect_jacobians(C._cols(points), list(n), d, list(e1), list(e2))
     dX, dm = _np(dX), _np(dm)
 
     def refl(X, abd):
@@ -126,10 +130,10 @@ def test_reflection_jacobians_match_central_differences(points):
 
 def test_plane_residual_jacobian_matches_central_differences(points):
     n, d = _mirror()
-    e1, e2 = C.tangent_basis_np(n)
-    G = _np([C.plane_residual_jacobian(C._cols(points), list(e1), list(e2))])[:, 0]
+    e1, e2 = SH.tangent_basis_np(n)
+    G = _np([F.plane_residual_jacobian(C._cols(points), list(e1), list(e2))])[:, 0]
     for k, X in enumerate(points):
-        num = _central(lambda q: [C.plane_residual(OPS, list(X), list(n), d, list(e1),
+        num = _central(lambda q: [F.plane_residual(OPS, list(X), list(n), d, list(e1),
                                                    list(e2), list(q))], np.zeros(3), 1e-6)
         np.testing.assert_allclose(G[k], num[0], rtol=FD_RTOL, atol=1e-6)
 
@@ -150,7 +154,7 @@ def _board_and_laser():
 def test_board_shift_jacobian_matches_moving_the_board():
     Rb, tb, nL, dL, P = _board_and_laser()
     nb, db = Rb[:, 2], float(Rb[:, 2] @ tb)
-    a = _np([C.board_shift_jacobian(C._cols(P), list(nb), db, dL)])[:, 0]
+    a = _np([F.board_shift_jacobian(C._cols(P), list(nb), db, dL)])[:, 0]
     for k, p in enumerate(P):
         def moved(q, p=p):
             R = _rodrigues(q[:3])
@@ -164,7 +168,7 @@ def test_board_shift_jacobian_matches_moving_the_board():
 def test_line_noise_gain_matches_back_projection():
     Rb, tb, nL, dL, P = _board_and_laser()
     nb, db = Rb[:, 2], float(Rb[:, 2] @ tb)
-    g = _np([C.line_noise_gain(C._cols(P), list(Rb[:, 0]), list(Rb[:, 1]), list(nL),
+    g = _np([F.line_noise_gain(C._cols(P), list(Rb[:, 0]), list(Rb[:, 1]), list(nL),
                                INTR)])[:, 0]
     K, dist = _K(INTR), [INTR[4], INTR[5], 0, 0, 0]
     for k, p in enumerate(P):
@@ -188,11 +192,11 @@ def test_spd_inverse_and_solve_match_numpy():
     A = A * np.outer(scale, scale)[None]
     Al = [[A[:, i, j] for j in range(n)] for i in range(n)]
     S = np.outer(scale, scale)[None]
-    inv = _np(C.spd_inverse(OPS, Al))
+    inv = _np(SM.spd_inverse(OPS, Al))
     # Compared in the scaled units, where every entry is O(1) (condition ~1e4).
     np.testing.assert_allclose(inv * S, np.linalg.inv(A) * S, rtol=1e-9, atol=1e-9)
     B = rng.normal(size=(m, n, 2))
-    X = _np(C.spd_solve(OPS, Al, [[B[:, i, j] for j in range(2)] for i in range(n)]))
+    X = _np(SM.spd_solve(OPS, Al, [[B[:, i, j] for j in range(2)] for i in range(n)]))
     np.testing.assert_allclose(X * scale[None, :, None],
                                np.linalg.solve(A, B) * scale[None, :, None], rtol=1e-9,
                                atol=1e-9)
@@ -215,7 +219,7 @@ def test_camera_covariance_matches_monte_carlo_of_zhang(rig_plan):
     Xall = np.concatenate(X)
     nc = len(X[0])
     sigma = 0.05
-    info = _np(C.camera_information(OPS, C._cols(Xall), INTR, nc))
+    info = _np(F.camera_information(OPS, C._cols(Xall), INTR, nc))
     cov = np.linalg.inv(info) * sigma ** 2
     cam = rig_plan[0].camera
     obj = boards[0].corners_board_mm()
@@ -263,7 +267,6 @@ def test_camera_covariance_matches_monte_carlo_of_zhang(rig_plan):
                             jac=lambda x: jac(x, model(x).ravel()), x_scale="jac")
         est.append(sol.x[:6])
     mc = np.cov(np.array(est).T)
-    print("camera σ MC / predicted:", np.sqrt(np.diag(mc) / np.diag(cov)))
     np.testing.assert_allclose(np.sqrt(np.diag(mc)), np.sqrt(np.diag(cov)), rtol=MC_RTOL)
     # The strongest correlations agree as well (fx–fy, k1–k2).
     corr = lambda c: c / np.sqrt(np.outer(np.diag(c), np.diag(c)))  # noqa: E731
@@ -284,11 +287,11 @@ def test_mirror_covariance_matches_monte_carlo_of_refine_mirror(rig_plan):
     intr = (K[0, 0], K[1, 1], K[0, 2], K[1, 2], 0.0, 0.0)
     sel = [s for s in shots if s.mirror == "left"]
     n, d = C._plane_cam(*rig.mirror("left").plane, cam.R, cam.t_mm)
-    e1, e2 = C.tangent_basis_np(n)
+    e1, e2 = SH.tangent_basis_np(n)
     X = np.concatenate([s.board.corners_world_mm() @ cam.R.T + cam.t_mm for s in sel])
     nc = len(X) // len(sel)
     sigma = 0.02
-    cov = np.linalg.inv(_np(C.mirror_information(OPS, C._cols(X), intr, list(n), d, list(e1),
+    cov = np.linalg.inv(_np(F.mirror_information(OPS, C._cols(X), intr, list(n), d, list(e1),
                                                  list(e2), nc))) * sigma ** 2
     Xv = X - 2 * (X @ n - d)[:, None] * n
     real, virt = _project(X, intr), _project(Xv, intr)
@@ -305,7 +308,6 @@ def test_mirror_covariance_matches_monte_carlo_of_refine_mirror(rig_plan):
                           initial=MirrorEstimate(n, d, np.zeros(1)))
         est.append(plane_offset_abd(n, d, e.normal, e.d_mm))
     mc = np.cov(np.array(est).T)
-    print("mirror σ MC / predicted:", np.sqrt(np.diag(mc) / np.diag(cov)))
     np.testing.assert_allclose(np.sqrt(np.diag(mc)), np.sqrt(np.diag(cov)), rtol=MC_RTOL)
 
 
@@ -326,16 +328,16 @@ def test_laser_plane_covariance_matches_monte_carlo(rig_plan):
     sel = [s for s in shots if s.kind == "laser"]
     planes = {m.name: C._plane_cam(*m.plane, R, t) for m in rig.mirrors}
     nL, dL = C._plane_cam(*rig.laser.plane, R, t)
-    eL1, eL2 = C.tangent_basis_np(nL)
+    eL1, eL2 = SH.tangent_basis_np(nL)
     n_line, sig_c, sig_l = 24, 0.03, 0.3
     X = np.concatenate([s.board.corners_world_mm() @ R.T + t for s in sel])
     nc = len(X) // len(sel)
     rep = lambda v: C._rep(np.array(v), nc)  # noqa: E731
-    Cp, Bp, _ = C.board_pose_information(
+    Cp, Bp, _ = F.board_pose_information(
         OPS, C._cols(X), intr, rep([planes[s.mirror][0] for s in sel]),
         rep([planes[s.mirror][1] for s in sel]),
-        rep([C.tangent_basis_np(planes[s.mirror][0])[0] for s in sel]),
-        rep([C.tangent_basis_np(planes[s.mirror][0])[1] for s in sel]), nc)
+        rep([SH.tangent_basis_np(planes[s.mirror][0])[0] for s in sel]),
+        rep([SH.tangent_basis_np(planes[s.mirror][0])[1] for s in sel]), nc)
     P, frames = [], []
     for s in sel:
         T = s.board.T_world_board
@@ -349,7 +351,7 @@ def test_laser_plane_covariance_matches_monte_carlo(rig_plan):
             "n_board": rl([f[0][:, 2] for f in frames]),
             "d_board": rl([f[0][:, 2] @ f[1] for f in frames]),
             "b1": rl([f[0][:, 0] for f in frames]), "b2": rl([f[0][:, 1] for f in frames])}
-    parts = C.laser_plane_parts(OPS, line, Cp, Bp, list(nL), dL, list(eL1), list(eL2), intr,
+    parts = F.laser_plane_parts(OPS, line, Cp, Bp, list(nL), dL, list(eL1), list(eL2), intr,
                                 n_line)
     cov = _np(parts["cov_line"]) * sig_l ** 2 + _np(parts["cov_pose"]) * sig_c ** 2
 
@@ -381,7 +383,6 @@ def test_laser_plane_covariance_matches_monte_carlo(rig_plan):
         e = fit_laser_plane(lines)
         est.append(plane_offset_abd(nL, dL, e.normal, e.d_mm))
     mc = np.cov(np.array(est).T)
-    print("laser σ MC / predicted:", np.sqrt(np.diag(mc) / np.diag(cov)))
     np.testing.assert_allclose(np.sqrt(np.diag(mc)), np.sqrt(np.diag(cov)), rtol=MC_RTOL)
 
 
@@ -431,8 +432,8 @@ def test_drjit_ops_agree_with_numpy(rig_plan):
     _, X = _camera_boards(rig_plan)
     Xall = np.concatenate(X)
     nc = len(X[0])
-    want = _np(C.camera_information(OPS, C._cols(Xall), INTR, nc))
-    got = C.camera_information(C.drjit_ops(), [Float64(c) for c in C._cols(Xall)],
+    want = _np(F.camera_information(OPS, C._cols(Xall), INTR, nc))
+    got = F.camera_information(B.drjit_ops(), [Float64(c) for c in C._cols(Xall)],
                                [Float64(v) for v in INTR], nc)
     got = np.array([[np.asarray(v)[0] for v in row] for row in got])
     np.testing.assert_allclose(got, want, rtol=1e-10)
@@ -443,7 +444,7 @@ def test_plan_covariance_of_the_paper_rig_matches_the_demo_calibration():
     least-squares σ's; the prediction at the measured noise levels is within 10 %.  The laser
     plane's σ's are the prediction's own golden numbers (the calibration's least squares
     treat the line points as independent, which they are not)."""
-    from lts360.design.calibration import plan_covariance
+    from lts360.design.calib_covariance import plan_covariance
     from lts360.scenes.rig_io import load_rig
 
     c = plan_covariance(load_rig("paper"))
@@ -494,7 +495,7 @@ def test_model_plan_covariance_equals_the_numpy_prediction_at_other_designs():
     the design's rig with the plan moved by the model's rule.  The camera and mirror blocks
     agree exactly; the laser plane within 25 % (the model keeps the base rig's count of line
     centres per sample, the numpy front end recounts them for the new camera)."""
-    from lts360.design.calibration import CalibrationPlan, predict_calibration_covariance
+    from lts360.design.calib_covariance import CalibrationPlan, predict_calibration_covariance
     from lts360.design.model import plan_covariance_at
     from lts360.design.params import DesignSpace
     from lts360.scenes.calib_plan import plan_calibration

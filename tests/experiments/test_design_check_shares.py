@@ -10,10 +10,16 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from lts360.experiments.design_check import _oriented_uncertainty, main, sigma_with_interval
+from lts360.cli import main as cli_main
+from lts360.experiments.design_check import _oriented_uncertainty, sigma_with_interval
 from lts360.recon.calibration.uncertainty import perturb_plane
 
 # --- bad input: one line, exit 2, nothing rendered ----------------------------------------------
+
+
+def main(argv):
+    """``lts360 design check ARGV``."""
+    return cli_main(["design", "check", *argv])
 
 
 @pytest.mark.parametrize("argv, field", [

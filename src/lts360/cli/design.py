@@ -1,4 +1,5 @@
-"""``lts360 design optimize|map``: rig design on the differentiable model (lts360.design)."""
+"""``lts360 design optimize|map|check``: rig design on the differentiable model (lts360.design)
+and the model's check against rendered simulation (lts360.experiments.design_check)."""
 
 from __future__ import annotations
 
@@ -61,7 +62,7 @@ def _calibration(source, base):
     if source is None or source == "none":
         return None
     if source == "plan":
-        from lts360.design.calibration import CalibrationPlan
+        from lts360.design.calib_covariance import CalibrationPlan
 
         try:
             return CalibrationPlan.from_rig(base)
@@ -160,7 +161,8 @@ def cmd_design_map(args) -> int:
 def add_design_parser(sub) -> None:
     from lts360.design.params import PARAMETERS
 
-    s = sub.add_parser("design", help="rig design on the differentiable model: optimize, map")
+    s = sub.add_parser("design", help="rig design on the differentiable model: optimize, map, "
+                       "check")
     ds = s.add_subparsers(dest="design_command", metavar="ACTION", parser_class=type(s))
     ds.required = True
     names = ", ".join(p.name for p in PARAMETERS)
@@ -214,3 +216,148 @@ def add_design_parser(sub) -> None:
     q.add_argument("--out", default="design-map.png")
     common(q)
     q.set_defaults(func=cmd_design_map)
+
+    q = ds.add_parser("check", help="the model against rendered simulation: radius σ and "
+                      "per-point σ (renders; minutes)")
+    q.add_argument("rigs", nargs="+", help="presets or rig TOML files")
+    q.add_argument("--draws", type=int, default=200, help="noisy images per rig (default 200)")
+    q.add_argument("--spp", type=int, default=16)
+    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--json", default=None, metavar="FILE", help="write the results as JSON")
+    q.add_argument("--shares", action="store_true",
+                   help="simulate the radius σ share by share (noise, compensation, "
+                        "calibration) for the gauge moved off the axis")
+    q.add_argument("--placement-mm", type=float, default=None,
+                   help="with --shares or --calibrations: offset of the gauge along +x, "
+                        "0..10 mm (default 2)")
+    q.add_argument("--calibration", default=None, metavar="FILE",
+                   help="with --shares: a calibration file whose uncertainty is drawn")
+    q.add_argument("--calibrations", nargs="+", default=None, metavar="FILE",
+                   help="the calibration share from these calibrations of the (one) rig: "
+                        "each compensates and measures the gauge (render → calibrate → "
+                        "compensate → measure)")
+    q.set_defaults(func=cmd_design_check)
+
+
+def _write_json(path, data) -> None:
+    """Write ``data`` to ``path`` through a temporary name (never a half-written file)."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with open(tmp, "w") as fh:
+        json.dump(data, fh, indent=2)
+    os.replace(tmp, path)
+
+
+def _first_line(exc: Exception) -> str:
+    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+
+
+def cmd_design_check(args) -> int:
+    """``lts360 design check``: the design model against full simulation (renders)."""
+    from lts360.cli.usage import _set_variant
+
+    if args.calibrations is not None:
+        return _check_calibrations(args)
+    if not args.shares:
+        if args.placement_mm is not None or args.calibration is not None:
+            raise UsageError("--placement-mm and --calibration need --shares")
+        return _check_rigs(args)
+    return _check_shares(args, _set_variant)
+
+
+def _load_rigs(sources):
+    from lts360.scenes.rig_io import load_rig
+
+    try:
+        return [(src, load_rig(src)) for src in sources]
+    except (ValueError, OSError) as exc:
+        raise UsageError(_first_line(exc)) from None
+
+
+def _check_rigs(args) -> int:
+    from lts360.cli.usage import _set_variant
+    from lts360.experiments.design_check import check_rig
+
+    rigs = _load_rigs(args.rigs)
+    _set_variant(None)
+    rows = []
+    for src, rig in rigs:
+        r = check_rig(rig, draws=args.draws, spp=args.spp, seed=args.seed)
+        r["source"] = src
+        rows.append(r)
+        m, s = r["model_pixel"], r["simulation"]
+        print(f"{src}: σ_R model {m['sigma_R_um']:.2f} µm (dorsch "
+              f"{r['model_dorsch']['sigma_R_um']:.2f}), simulated {s['sigma_R_um']:.2f} "
+              f"[{s['sigma_R_95_um'][0]:.2f}, {s['sigma_R_95_um'][1]:.2f}] µm ({s['draws']} draws); "
+              f"per point model {m['point_rms_um']:.1f} µm (dorsch "
+              f"{r['model_dorsch']['point_rms_um']:.1f}), simulated {s['point_rms_um']:.1f} µm; "
+              f"coverage model {m['coverage_deg']:.1f}°, measured {s['coverage_deg']:.1f}° "
+              f"({s['seconds']:.0f} s)", flush=True)
+    if args.json:
+        _write_json(args.json, rows)
+    return 0
+
+
+def _check_shares(args, set_variant) -> int:
+    from lts360.experiments.design_check import (
+        check_shares,
+        file_uncertainty,
+        format_shares,
+        share_args_error,
+    )
+
+    placement = 2.0 if args.placement_mm is None else args.placement_mm
+    msg = share_args_error(args.draws, args.spp, placement, args.calibration)
+    if msg is not None:
+        raise UsageError(msg)
+    rigs = _load_rigs(args.rigs)
+    if args.calibration is not None:
+        try:
+            file_uncertainty(args.calibration)
+        except (ValueError, OSError) as exc:
+            raise UsageError(_first_line(exc)) from None
+    set_variant(None)
+    rows = []
+    for src, rig in rigs:
+        r = check_shares(rig, draws=args.draws, spp=args.spp, seed=args.seed,
+                         placement_mm=placement, calibration=args.calibration, progress=True)
+        r["source"] = src
+        rows.append(r)
+        print("\n".join(format_shares(r)), flush=True)
+    if args.json:
+        _write_json(args.json, rows)
+    return 0
+
+
+def _check_calibrations(args) -> int:
+    from lts360.cli.usage import _set_variant
+    from lts360.experiments.design_check import MAX_PLACEMENT_MM, check_calibrations
+
+    placement = 2.0 if args.placement_mm is None else args.placement_mm
+    if len(args.rigs) != 1:
+        raise UsageError("--calibrations: give exactly one rig")
+    if len(args.calibrations) < 3:
+        raise UsageError(f"--calibrations: need at least 3 files, got {len(args.calibrations)}")
+    if not 0 <= placement <= MAX_PLACEMENT_MM:
+        raise UsageError(f"--placement-mm: must be in [0, {MAX_PLACEMENT_MM:g}], "
+                         f"got {placement:g}")
+    missing = [f for f in args.calibrations if not os.path.isfile(f)]
+    if missing:
+        raise UsageError(f"--calibrations: no file {missing[0]!r}")
+    (_, rig), = _load_rigs(args.rigs)
+    _set_variant(None)
+    r = check_calibrations(rig, args.calibrations, spp=args.spp, seed=args.seed,
+                           placement_mm=placement)
+    c = r["compensated"]
+    for row in r["calibrations"]:
+        print(f"  {row['file']}: radius error {row['error_um']:+.2f} µm compensated "
+              f"({row['error_uncompensated_um']:+.2f} µm not); model share with its own "
+              f"covariance {row['model_file_covariance_um']:.2f} µm")
+    print(f"{rig.name} @ +{placement:g} mm: σ over {len(r['calibrations'])} calibrations "
+          f"{c['sigma_um']:.2f} [{c['sigma_95_um'][0]:.2f}, {c['sigma_95_um'][1]:.2f}] µm "
+          f"(not compensated {r['uncompensated']['sigma_um']:.2f} µm); model: plan "
+          f"{r['model_plan_um']:.2f} µm, the files' own covariances {r['model_files_rms_um']:.2f} "
+          f"µm (rms)", flush=True)
+    if args.json:
+        _write_json(args.json, r)
+    return 0

@@ -42,7 +42,9 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["CalibrationCovariance", "CAMERA_NAMES", "PLANE_NAMES", "spd_inverse",
+from lts360.design.smallmat import spd_inverse_ridged
+
+__all__ = ["CalibrationCovariance", "CAMERA_NAMES", "PLANE_NAMES",
            "compensation_shares", "tangent_basis_np"]
 
 #: Camera parameters of a calibration's covariance (OpenCV's names and order).
@@ -191,51 +193,6 @@ def _plane_block(cov, what: str) -> np.ndarray:
     return c
 
 
-def spd_inverse(A: list, sqrt, ridge: float = 1e-9) -> list:
-    """Inverse of a small symmetric positive (semi)definite matrix of arrays, by Cholesky.
-
-    ``A`` is a list of rows of arrays (numpy or Dr.Jit, one matrix per element); only the
-    lower triangle is read.  A ridge of ``ridge × (1 + mean diagonal)`` on the diagonal keeps
-    a singular block (a view that sees nothing) finite; it changes a well-posed inverse by a
-    relative ~``ridge``.
-    """
-    n = len(A)
-    tr = A[0][0]
-    for i in range(1, n):
-        tr = tr + A[i][i]
-    eps = ridge * (1.0 + tr * (1.0 / n))
-    L = [[None] * n for _ in range(n)]
-    for j in range(n):
-        s = A[j][j] + eps
-        for k in range(j):
-            s = s - L[j][k] * L[j][k]
-        d = sqrt(s)
-        L[j][j] = d
-        inv_d = 1.0 / d
-        for i in range(j + 1, n):
-            s = A[i][j]
-            for k in range(j):
-                s = s - L[i][k] * L[j][k]
-            L[i][j] = s * inv_d
-    # W = L⁻¹ (lower triangular), then A⁻¹ = Wᵀ W.
-    W = [[None] * n for _ in range(n)]
-    for i in range(n):
-        W[i][i] = 1.0 / L[i][i]
-        for j in range(i):
-            s = L[i][j] * W[j][j]
-            for k in range(j + 1, i):
-                s = s + L[i][k] * W[k][j]
-            W[i][j] = -s * W[i][i]
-    inv = [[None] * n for _ in range(n)]
-    for i in range(n):
-        for j in range(i + 1):
-            s = W[i][i] * W[i][j]
-            for k in range(i + 1, n):
-                s = s + W[k][i] * W[k][j]
-            inv[i][j] = s
-            inv[j][i] = s
-    return inv
-
 
 def _moments(s6) -> list:
     """The 3×3 symmetric matrix of the six sums (1, c, s, c², cs, s²)."""
@@ -273,7 +230,7 @@ def compensation_shares(case_A: dict, ref_A: dict, ref_B: dict, case_dr: dict, r
     for v in views:
         m = _moments(case_A[v])
         Mc = [[Mc[i][j] + m[i][j] for j in range(3)] for i in range(3)]
-    Pc = spd_inverse(Mc, sqrt)
+    Pc = spd_inverse_ridged(Mc, sqrt)
     g = [Pc[0][0], Pc[0][1], Pc[0][2]]  # (M_c⁻¹ e0)
     h = {}
     for v in mirror_views:
@@ -303,7 +260,7 @@ def compensation_shares(case_A: dict, ref_A: dict, ref_B: dict, case_dr: dict, r
                         Mr[o + a][o + b] = m[1 + a][1 + b]
             return Mr
 
-        P = spd_inverse(joint(ref_A), sqrt)
+        P = spd_inverse_ridged(joint(ref_A), sqrt)
         S = joint(ref_B)
         # Cov_t = P[t, :] S P[:, t] / shots, contracted with h at once: hᵀ P_t S P_tᵀ h.
         hv = [zero] * 3

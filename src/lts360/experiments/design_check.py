@@ -17,17 +17,16 @@ noisy reference image of the centred gauge, applied to another image) and, with 
 file, the calibration's (a calibration drawn from the file's covariance about the true one,
 compensated on the noise-free reference, measuring the noise-free moved gauge).
 
-Run: ``PYTHONPATH=src python3 -m lts360.experiments.design_check RIG [RIG ...] --draws 200``,
-or ``... RIG --shares --draws 60 [--placement-mm 2] [--calibration FILE] [--json OUT]``.
+Run: ``lts360 design check RIG [RIG ...] --draws 200``, or ``lts360 design check RIG --shares
+--draws 60 [--placement-mm 2] [--calibration FILE] [--json OUT]``, or ``lts360 design check
+RIG --calibrations FILE FILE FILE...``.
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import math
-import os
 import sys
 import time
 from pathlib import Path
@@ -36,9 +35,9 @@ import numpy as np
 
 from lts360.design.model import Conditions, evaluate
 from lts360.design.params import DesignSpace
-from lts360.scenes.rig_io import load_rig
 
-__all__ = ["check_rig", "check_shares", "sigma_with_interval", "main"]
+__all__ = ["check_rig", "check_shares", "check_calibrations", "sigma_with_interval",
+           "format_shares", "share_args_error", "file_uncertainty", "MAX_PLACEMENT_MM"]
 
 GAUGE_DIAMETER_MM = 19.9987
 #: Largest placement of the shares check (mm): beyond it the gauge leaves the views' band.
@@ -126,7 +125,7 @@ def _difference_share(with_share: dict, without: dict) -> dict:
                             math.sqrt(d * nu / chi2.ppf(0.025, nu))]}
 
 
-def _share_args_error(draws, spp, placement_mm, calibration) -> str | None:
+def share_args_error(draws, spp, placement_mm, calibration) -> str | None:
     """One line naming the bad argument of :func:`check_shares`, or None."""
     if isinstance(draws, bool) or not isinstance(draws, (int, np.integer)) \
             or draws < MIN_SHARE_DRAWS:
@@ -141,7 +140,7 @@ def _share_args_error(draws, spp, placement_mm, calibration) -> str | None:
     return None
 
 
-def _file_uncertainty(path):
+def file_uncertainty(path):
     """The calibration file's ``uncertainty`` dict and the file's calibration (its normals).
 
     Raises
@@ -231,8 +230,12 @@ def _offsets(result) -> dict | None:
 def _simulate_shares(rig, *, draws: int, spp: int, seed: int, placement_mm: float,
                      uncertainty: dict | None, file_cal, scale: float, progress: bool) -> dict:
     """Per-draw radius errors (mm) of the three simulated shares (see :func:`check_shares`)."""
-    from lts360.experiments.design_space.settings import (BAND_MM, GAUGE_SPEC, R_STEP_MM,
-                                                          THETA_STEP_DEG)
+    from lts360.experiments.design_space.settings import (
+        BAND_MM,
+        GAUGE_SPEC,
+        R_STEP_MM,
+        THETA_STEP_DEG,
+    )
     from lts360.experiments.design_space.trial import _measure_draw
     from lts360.recon.calibration.model import calibration_from_frame_truth
     from lts360.recon.calibration.uncertainty import sample_calibration
@@ -331,19 +334,23 @@ def check_calibrations(rig, files, *, spp: int = 16, seed: int = 0,
     95 % interval, and the model's share for the plan's predicted covariance and for each
     file's own covariance.
     """
-    from lts360.design.calibration import plan_covariance
+    import mitsuba as mi
+
+    from lts360.design.calib_covariance import plan_covariance
     from lts360.design.model import Conditions, evaluate
     from lts360.design.params import DesignSpace
     from lts360.design.shares import CalibrationCovariance
-    from lts360.experiments.design_space.settings import BAND_MM, GAUGE_SPEC, R_STEP_MM, \
-        THETA_STEP_DEG
+    from lts360.experiments.design_space.settings import (
+        BAND_MM,
+        GAUGE_SPEC,
+        R_STEP_MM,
+        THETA_STEP_DEG,
+    )
     from lts360.experiments.design_space.trial import _measure_draw
     from lts360.recon.calibration.model import load_calibration
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.scenes.objects import build_object
     from lts360.simulator.frame import sensor_image, simulate_frame
-
-    import mitsuba as mi
 
     if len(files) < 3:
         raise ValueError(f"check_calibrations: need at least 3 calibration files, got {len(files)}")
@@ -465,12 +472,12 @@ def check_shares(rig, *, draws: int, spp: int, seed: int, placement_mm: float = 
     """
     import mitsuba as mi
 
-    msg = _share_args_error(draws, spp, placement_mm, calibration)
+    msg = share_args_error(draws, spp, placement_mm, calibration)
     if msg:
         raise ValueError(msg)
     if not (isinstance(scale, (int, float)) and 0.0 < scale <= 1.0):
         raise ValueError(f"scale: must be in (0, 1], got {scale!r}")
-    unc, file_cal = _file_uncertainty(calibration) if calibration is not None else (None, None)
+    unc, file_cal = file_uncertainty(calibration) if calibration is not None else (None, None)
     if mi.variant() is None:
         mi.set_variant("llvm_ad_mono")
     t0 = time.perf_counter()
@@ -548,131 +555,3 @@ def format_shares(r: dict) -> list[str]:
                     else f", calibration {_fmt_share(sh['calibration']['sigma_um'])}")
                  + f" ({r['draws']} draws, {r['seconds']:.0f} s)")
     return lines
-
-
-def _write_json(path, data) -> None:
-    """Write ``data`` to ``path`` through a temporary name (never a half-written file)."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "w") as fh:
-        json.dump(data, fh, indent=2)
-    os.replace(tmp, path)
-
-
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("rigs", nargs="+", help="presets or rig TOML files")
-    ap.add_argument("--draws", type=int, default=200)
-    ap.add_argument("--spp", type=int, default=16)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--json", default=None)
-    ap.add_argument("--shares", action="store_true",
-                    help="simulate the radius σ share by share (noise, compensation, "
-                         "calibration) for the gauge moved off the axis")
-    ap.add_argument("--placement-mm", type=float, default=None,
-                    help=f"with --shares: offset of the gauge along +x, 0..{MAX_PLACEMENT_MM:g} "
-                         "mm (default 2)")
-    ap.add_argument("--calibration", default=None, metavar="FILE",
-                    help="with --shares: a calibration file whose uncertainty is drawn")
-    ap.add_argument("--calibrations", nargs="+", default=None, metavar="FILE",
-                    help="the calibration share from these calibrations of the (one) rig: "
-                         "each compensates and measures the gauge (render → calibrate → "
-                         "compensate → measure)")
-    args = ap.parse_args(argv)
-    if args.calibrations is not None:
-        return _main_calibrations(args)
-    if not args.shares:
-        if args.placement_mm is not None or args.calibration is not None:
-            print("design_check: --placement-mm and --calibration need --shares",
-                  file=sys.stderr)
-            return 2
-        return _main_rigs(args)
-    return _main_shares(args)
-
-
-def _main_rigs(args) -> int:
-    rows = []
-    for src in args.rigs:
-        r = check_rig(load_rig(src), draws=args.draws, spp=args.spp, seed=args.seed)
-        r["source"] = src
-        rows.append(r)
-        m, s = r["model_pixel"], r["simulation"]
-        print(f"{src}: σ_R model {m['sigma_R_um']:.2f} µm (dorsch "
-              f"{r['model_dorsch']['sigma_R_um']:.2f}), simulated {s['sigma_R_um']:.2f} "
-              f"[{s['sigma_R_95_um'][0]:.2f}, {s['sigma_R_95_um'][1]:.2f}] µm ({s['draws']} draws); "
-              f"per point model {m['point_rms_um']:.1f} µm (dorsch "
-              f"{r['model_dorsch']['point_rms_um']:.1f}), simulated {s['point_rms_um']:.1f} µm; "
-              f"coverage model {m['coverage_deg']:.1f}°, measured {s['coverage_deg']:.1f}° "
-              f"({s['seconds']:.0f} s)", flush=True)
-    if args.json:
-        _write_json(args.json, rows)
-    return 0
-
-
-def _main_shares(args) -> int:
-    placement = 2.0 if args.placement_mm is None else args.placement_mm
-    msg = _share_args_error(args.draws, args.spp, placement, args.calibration)
-    rigs = []
-    if msg is None:
-        try:
-            rigs = [(src, load_rig(src)) for src in args.rigs]
-            if args.calibration is not None:
-                _file_uncertainty(args.calibration)
-        except (ValueError, OSError) as exc:
-            msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-    if msg is not None:
-        print(f"design_check: {msg}", file=sys.stderr)
-        return 2
-    rows = []
-    for src, rig in rigs:
-        r = check_shares(rig, draws=args.draws, spp=args.spp, seed=args.seed,
-                         placement_mm=placement, calibration=args.calibration, progress=True)
-        r["source"] = src
-        rows.append(r)
-        print("\n".join(format_shares(r)), flush=True)
-    if args.json:
-        _write_json(args.json, rows)
-    return 0
-
-
-def _main_calibrations(args) -> int:
-    placement = 2.0 if args.placement_mm is None else args.placement_mm
-    msg = None
-    if len(args.rigs) != 1:
-        msg = "--calibrations: give exactly one rig"
-    elif len(args.calibrations) < 3:
-        msg = f"--calibrations: need at least 3 files, got {len(args.calibrations)}"
-    elif not 0 <= placement <= MAX_PLACEMENT_MM:
-        msg = f"--placement-mm: must be in [0, {MAX_PLACEMENT_MM:g}], got {placement:g}"
-    else:
-        missing = [f for f in args.calibrations if not os.path.isfile(f)]
-        if missing:
-            msg = f"--calibrations: no file {missing[0]!r}"
-    rig = None
-    if msg is None:
-        try:
-            rig = load_rig(args.rigs[0])
-        except (ValueError, OSError) as exc:
-            msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-    if msg is not None:
-        print(f"design_check: {msg}", file=sys.stderr)
-        return 2
-    r = check_calibrations(rig, args.calibrations, spp=args.spp, seed=args.seed,
-                           placement_mm=placement)
-    c = r["compensated"]
-    for row in r["calibrations"]:
-        print(f"  {row['file']}: radius error {row['error_um']:+.2f} µm compensated "
-              f"({row['error_uncompensated_um']:+.2f} µm not); model share with its own "
-              f"covariance {row['model_file_covariance_um']:.2f} µm")
-    print(f"{rig.name} @ +{placement:g} mm: σ over {len(r['calibrations'])} calibrations "
-          f"{c['sigma_um']:.2f} [{c['sigma_95_um'][0]:.2f}, {c['sigma_95_um'][1]:.2f}] µm "
-          f"(not compensated {r['uncompensated']['sigma_um']:.2f} µm); model: plan "
-          f"{r['model_plan_um']:.2f} µm, the files' own covariances {r['model_files_rms_um']:.2f} "
-          f"µm (rms)", flush=True)
-    if args.json:
-        _write_json(args.json, r)
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

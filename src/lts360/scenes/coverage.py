@@ -26,14 +26,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from lts360.geometry.camera import project_points
-from lts360.geometry.mirror import reflect_directions
+from lts360.geometry import mirror_path
+from lts360.geometry.mirror_path import PathMirror, rectangle_extent
 from lts360.scenes.rig import Mirror, Rig
 
 __all__ = ["mirror_sequences", "view_name", "path_valid", "CoverageResult", "coverage",
            "circular_windows"]
-
-_EPS = 1e-9
-
 
 def mirror_sequences(mirrors: tuple[Mirror, ...], max_bounces: int) -> list[tuple[int, ...]]:
     """Ordered mirror index sequences of length ``0..max_bounces`` without immediate repeats."""
@@ -50,43 +48,20 @@ def view_name(seq: tuple[int, ...], mirrors: tuple[Mirror, ...]) -> str:
     return "direct" if not seq else "-".join(mirrors[i].name for i in seq)
 
 
-def _segment_blocked_by_cylinder(a: np.ndarray, b: np.ndarray, radius_mm: float,
-                                 skip_start: bool) -> np.ndarray:
-    """Whether segments a→b (n, 3) pass inside the vertical cylinder of radius r about Z."""
-    a2, b2 = a[:, :2], b[:, :2]
-    d = b2 - a2
-    dd = np.einsum("ij,ij->i", d, d)
-    t = np.clip(-np.einsum("ij,ij->i", a2, d) / np.maximum(dd, 1e-300), 0.0, 1.0)
-    closest = a2 + t[:, None] * d
-    inside = np.einsum("ij,ij->i", closest, closest) < radius_mm**2 * (1.0 - 1e-9)
-    if skip_start:
-        # The segment starts on the surface; it is blocked only if it re-enters the cylinder,
-        # which for a convex section cannot happen once it leaves outwards.
-        inside &= np.einsum("ij,ij->i", a2, d) < 0
-        inside &= t > 1e-9
-    return inside
-
-
-def _segment_blocked_by_mirrors(a: np.ndarray, b: np.ndarray, mirrors, skip: set[int]) -> np.ndarray:
-    blocked = np.zeros(len(a), dtype=bool)
-    for k, m in enumerate(mirrors):
-        if k in skip:
-            continue
+def path_mirrors(mirrors: tuple[Mirror, ...]) -> list[PathMirror]:
+    """The rig's mirrors as the path test sees them (world frame, their rectangles)."""
+    out = []
+    for m in mirrors:
         n, d = m.plane
-        da, db = a @ n - d, b @ n - d
-        crosses = (da * db) < 0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = da / (da - db)
-            p = a + t[:, None] * (b - a)  # NaN where the segment lies in the plane
-        q = p - m.center_mm
-        inside = (np.abs(q @ m.u_axis) <= m.width_mm / 2) & (np.abs(q @ m.v_axis) <= m.height_mm / 2)
-        blocked |= crosses & inside
-    return blocked
+        out.append(PathMirror(n=n, d=d, T=m.T, contains=rectangle_extent(
+            m.center_mm, m.u_axis, m.v_axis, m.width_mm, m.height_mm)))
+    return out
 
 
 def path_valid(points_mm: np.ndarray, target_mm: np.ndarray, seq: tuple[int, ...],
                mirrors: tuple[Mirror, ...], radius_mm: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Trace the light path from surface points to a real target through a mirror sequence.
+    """Trace the light path from surface points to a real target through a mirror sequence
+    (:func:`lts360.geometry.mirror_path.path_valid` on the rig's mirrors).
 
     Parameters
     ----------
@@ -109,37 +84,7 @@ def path_valid(points_mm: np.ndarray, target_mm: np.ndarray, seq: tuple[int, ...
     arrive_dir : (n, 3) float
         Unit direction in which the path reaches the target (pointing towards the target).
     """
-    pts = np.asarray(points_mm, dtype=float).reshape(-1, 3)
-    virtual = np.asarray(target_mm, dtype=float).reshape(1, 3)
-    for k in reversed(seq):
-        virtual = virtual @ mirrors[k].T[:3, :3].T + mirrors[k].T[:3, 3]
-    direction = virtual - pts
-    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    leave_dir = direction.copy()
-    valid = np.ones(len(pts), dtype=bool)
-    p = pts
-    first = True
-    prev: int | None = None
-    for k in seq:
-        m = mirrors[k]
-        n, d = m.plane
-        denom = direction @ n
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (d - p @ n) / denom
-        valid &= (denom < 0) & (t > _EPS)
-        t = np.where(valid, t, 0.0)
-        hit = p + t[:, None] * direction
-        q = hit - m.center_mm
-        valid &= (np.abs(q @ m.u_axis) <= m.width_mm / 2) & (np.abs(q @ m.v_axis) <= m.height_mm / 2)
-        skip = {k} if prev is None else {k, prev}
-        valid &= ~_segment_blocked_by_cylinder(p, hit, radius_mm, skip_start=first)
-        valid &= ~_segment_blocked_by_mirrors(p, hit, mirrors, skip)
-        direction = reflect_directions(direction, n)
-        p, first, prev = hit, False, k
-    end = np.broadcast_to(np.asarray(target_mm, dtype=float), p.shape)
-    valid &= ~_segment_blocked_by_cylinder(p, end, radius_mm, skip_start=first)
-    valid &= ~_segment_blocked_by_mirrors(p, end, mirrors, set() if prev is None else {prev})
-    return valid, leave_dir, direction
+    return mirror_path.path_valid(points_mm, target_mm, seq, path_mirrors(mirrors), radius_mm)
 
 
 def circular_windows(theta_rad: np.ndarray, mask: np.ndarray) -> list[tuple[float, float]]:

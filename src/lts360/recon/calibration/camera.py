@@ -321,6 +321,7 @@ def calibrate_camera(images, board: BoardGeometry, *, max_image_rms_px: float = 
     keep = [None if c is None else np.ones(len(c), bool) for c in found]
     flags = (cv2.CALIB_FIX_K3 if fix_k3 else 0) | (cv2.CALIB_ZERO_TANGENT_DIST if zero_tangent else 0)
     crit = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-12)
+    K = dist = rvecs = tvecs = None  # set by round 0's calibration, read by the later rounds
     for model_round in range(board_model_rounds + 1):
         if model_round > 0:  # the corners from the image model, from the last calibration
             idx = np.flatnonzero(used)

@@ -219,7 +219,7 @@ def make_runner(cal: Calibration, *, peak: str = "centroid", backend: str = "aut
     view, flagged ``HIDDEN`` first (:func:`lts360.recon.triangulation.reject.mark_hidden`).
     """
     if reject:
-        from lts360.recon.triangulation.reject import reject_discontinuous, reject_spurious
+        from lts360.recon.triangulation.reject import reject_discontinuous
 
         if continuity_k is not None and not continuity_k > 0:
             raise ValueError(f"continuity_k must be > 0, got {continuity_k}")

@@ -46,7 +46,7 @@ from the measurement alone:
     ``notch_round_tol_mm`` of the section's least-squares circle: there a "notch" is a glint's
     structured error or noise (the alu pipe's 159 NOTCH points → 33), while a cable's valleys
     lie farther off the circle; behind that test a scan calls a notch from
-    60 µm (:data:`DEFAULT_SCAN_NOTCH_DEPTH_MM`; one frame: 80 µm).
+    60 µm (:attr:`RejectionTolerances.scan_notch_depth_mm`; one frame: 80 µm).
 ``FLANK``
     In a scan only: a valid point whose section's profile differs from *both* neighbouring
     sections' by an axial slope ``|dr/dz|`` above ``max_flank_slope`` over at least
@@ -68,6 +68,10 @@ from the measurement alone:
     sheet's tail in the next (measured: cable-6 2.8 mm off the axis, 303 → 172 spurious
     points still valid).
 
+Every threshold, with its reason and the measurement that set it, is a field of
+:class:`~lts360.recon.triangulation.reject_tolerances.RejectionTolerances`; the functions'
+defaults read :data:`TOLERANCES`.
+
 Agreement between views is not used as a criterion: on rendered round objects the views'
 radii where they overlap (grazing points at the windows' ends) differ by up to 80 µm
 noise-free and 150 µm with realistic noise, as much as a cable's spurious points.
@@ -82,54 +86,13 @@ import numpy as np
 
 from lts360.recon.triangulation.inverse import InverseResult
 from lts360.recon.triangulation.peaks import Quality
+from lts360.recon.triangulation.reject_tolerances import TOLERANCES, RejectionTolerances
 
-__all__ = ["continuity_outliers", "reject_discontinuous", "DEFAULT_CONTINUITY_K",
-           "DEFAULT_CONTINUITY_WINDOW_DEG", "DEFAULT_CONTINUITY_FLOOR_MM", "fading_points",
-           "section_profile", "notch_depth", "reject_spurious", "rejection_counts",
-           "REJECTION_CODES", "DEFAULT_FADE_MARGIN_MM", "DEFAULT_FADE_GAP_MM",
-           "convex_gaps", "axial_slopes", "flank_slopes", "screw_rate", "reject_like_neighbours",
-           "DEFAULT_MAX_FLANK_SLOPE", "reject_scan", "mark_hidden", "ProfileGeometry",
-           "DEFAULT_SHORT_GAP_MM",
-           "DEFAULT_SHORT_MARGIN_MM",
-           "DEFAULT_NOTCH_DEPTH_MM", "DEFAULT_SCAN_NOTCH_DEPTH_MM", "DEFAULT_NOTCH_SCALES_MM"]
+__all__ = ["continuity_outliers", "reject_discontinuous", "fading_points", "section_profile",
+           "notch_depth", "reject_spurious", "rejection_counts", "REJECTION_CODES",
+           "convex_gaps", "mark_hidden", "ProfileGeometry", "TOLERANCES",
+           "RejectionTolerances"]
 
-DEFAULT_CONTINUITY_K = 6.0
-DEFAULT_CONTINUITY_WINDOW_DEG = 2.0
-#: Below this a residual is never an outlier: a few times the pixel-locking scatter (~3 µm rms).
-DEFAULT_CONTINUITY_FLOOR_MM = 0.015
-#: Arc next to a faded stretch whose points are rejected, and the shortest faded stretch.
-DEFAULT_FADE_MARGIN_MM = 0.5
-DEFAULT_FADE_GAP_MM = 0.3
-#: The narrower tier: the line's last 0.07 mm before a faded stretch of 0.1 mm or more.
-DEFAULT_SHORT_GAP_MM = 0.1
-DEFAULT_SHORT_MARGIN_MM = 0.07
-#: In a scan, a faded stretch across which the profile is convex is kept: chords this far
-#: beyond its flanks, which must bulge by this fraction of a circle's sagitta (0: lie above
-#: the chord at all; the round and axial tests below do the separating, measured)...
-DEFAULT_CONVEX_REACH_MM = 1.0
-DEFAULT_CONVEX_FRACTION = 0.0
-#: ... and along which the surface runs straighter than this (|dr/dz| between sections).
-DEFAULT_MAX_AXIAL_SLOPE = 0.3
-#: ... and where the section is round: its profile within this of its least-squares circle.
-DEFAULT_ROUND_TOL_MM = 0.15
-#: Depth below the profile's chord that makes a notch, and the chords' half-lengths (arc).
-DEFAULT_NOTCH_DEPTH_MM = 0.08
-DEFAULT_NOTCH_SCALES_MM = (0.5, 1.0)
-#: In a scan, no notch where the profile is within this of the section's circle (a round
-#: section's glints and noise; a cable's valleys lie farther off it).
-DEFAULT_NOTCH_ROUND_TOL_MM = 0.1
-#: In a scan, where that test keeps round sections out, a shallower notch is called.
-DEFAULT_SCAN_NOTCH_DEPTH_MM = 0.06
-#: In a scan, a section whose profile differs from both neighbours' by more than this axial
-#: slope ``|dr/dz|`` lies on a flank (``FLANK``).
-DEFAULT_MAX_FLANK_SLOPE = 0.15
-#: ... over a stretch of at least this arc (a cable's noisy valleys differ from their
-#: neighbours' over 1–2°; a groove's or a shoulder's flank over much of the turn).
-DEFAULT_MIN_FLANK_ARC_MM = 2.0
-#: The largest turn of the profile between neighbouring sections that :func:`screw_rate` seeks.
-DEFAULT_MAX_SCREW_SHIFT_DEG = 10.0
-#: ``NEIGHBOURS``: how many θ samples either side a neighbour's rejection is widened by.
-DEFAULT_NEIGHBOUR_DILATION = 1
 #: Samples each side of the profile's running median and mean.
 _PROFILE_HALF = 5
 #: Truth-free rejections, by the name ``lts360 score`` and the cloud's header give them.
@@ -140,8 +103,8 @@ REJECTION_CODES = {"continuity": Quality.DISCONTINUOUS, "fading": Quality.FADING
                    "saturated_plateau": Quality.SATURATED_PLATEAU}
 
 
-def continuity_outliers(r_mm, *, half_window: int, k: float = DEFAULT_CONTINUITY_K,
-                        floor_mm: float = DEFAULT_CONTINUITY_FLOOR_MM,
+def continuity_outliers(r_mm, *, half_window: int, k: float = TOLERANCES.continuity_k,
+                        floor_mm: float = TOLERANCES.continuity_floor_mm,
                         periodic: bool = True) -> np.ndarray:
     """(n,) bool: valid radii off the running median of ``r_mm`` (NaN = no point) by more than
     ``max(k·σ, floor_mm)``.
@@ -182,9 +145,9 @@ def continuity_outliers(r_mm, *, half_window: int, k: float = DEFAULT_CONTINUITY
     return ok & (np.abs(res) > max(k * sigma, floor_mm))
 
 
-def reject_discontinuous(result: InverseResult, *, k: float = DEFAULT_CONTINUITY_K,
-                         half_window_deg: float = DEFAULT_CONTINUITY_WINDOW_DEG,
-                         floor_mm: float = DEFAULT_CONTINUITY_FLOOR_MM) -> InverseResult:
+def reject_discontinuous(result: InverseResult, *, k: float = TOLERANCES.continuity_k,
+                         half_window_deg: float = TOLERANCES.continuity_window_deg,
+                         floor_mm: float = TOLERANCES.continuity_floor_mm) -> InverseResult:
     """The result with each view's discontinuous points flagged ``DISCONTINUOUS`` and invalid."""
     grid = result.grid
     step = np.degrees(grid.theta_step_rad) if grid.n_theta > 1 else float("nan")
@@ -267,10 +230,10 @@ def _chord_depth(pts: np.ndarray, i: np.ndarray, a: np.ndarray, b: np.ndarray) -
 
 
 def convex_gaps(gap: np.ndarray, profile_mm: np.ndarray, theta_rad: np.ndarray, *,
-                margin: int, reach: int, fraction: float = DEFAULT_CONVEX_FRACTION,
+                margin: int, reach: int, fraction: float = TOLERANCES.convex_fraction,
                 periodic: bool = True, axial_slope=None,
-                max_axial_slope: float = DEFAULT_MAX_AXIAL_SLOPE,
-                round_tol_mm: float = DEFAULT_ROUND_TOL_MM) -> np.ndarray:
+                max_axial_slope: float = TOLERANCES.max_axial_slope,
+                round_tol_mm: float = TOLERANCES.round_tol_mm) -> np.ndarray:
     """(n,) bool: the samples of each stretch of ``gap`` across which the section's profile is
     convex and the surface runs straight along the axis, so that the line cannot have faded
     there for geometry.
@@ -340,14 +303,15 @@ def convex_gaps(gap: np.ndarray, profile_mm: np.ndarray, theta_rad: np.ndarray, 
 
 
 def fading_points(r_mm, window, theta_step_rad: float, *,
-                  margin_mm: float = DEFAULT_FADE_MARGIN_MM, gap_mm: float = DEFAULT_FADE_GAP_MM,
+                  margin_mm: float = TOLERANCES.fade_margin_mm,
+                  gap_mm: float = TOLERANCES.fade_gap_mm,
                   periodic: bool = True, profile_mm=None, theta_rad=None,
-                  convex_reach_mm: float = DEFAULT_CONVEX_REACH_MM,
-                  convex_fraction: float = DEFAULT_CONVEX_FRACTION, axial_slope=None,
-                  max_axial_slope: float = DEFAULT_MAX_AXIAL_SLOPE,
-                  round_tol_mm: float = DEFAULT_ROUND_TOL_MM,
-                  short_gap_mm: float = DEFAULT_SHORT_GAP_MM,
-                  short_margin_mm: float = DEFAULT_SHORT_MARGIN_MM) -> np.ndarray:
+                  convex_reach_mm: float = TOLERANCES.convex_reach_mm,
+                  convex_fraction: float = TOLERANCES.convex_fraction, axial_slope=None,
+                  max_axial_slope: float = TOLERANCES.max_axial_slope,
+                  round_tol_mm: float = TOLERANCES.round_tol_mm,
+                  short_gap_mm: float = TOLERANCES.short_gap_mm,
+                  short_margin_mm: float = TOLERANCES.short_margin_mm) -> np.ndarray:
     """(n,) bool: valid radii within ``margin_mm`` of arc of a stretch of at least ``gap_mm``
     of the window (``window``) with no valid radius.
 
@@ -436,7 +400,7 @@ def section_profile(theta_rad, radii_mm, *, periodic: bool = True,
     return np.where(np.isfinite(r), mean, np.nan)
 
 
-def notch_depth(theta_rad, profile_mm, *, scales_mm=DEFAULT_NOTCH_SCALES_MM,
+def notch_depth(theta_rad, profile_mm, *, scales_mm=TOLERANCES.notch_scales_mm,
                 periodic: bool = True) -> np.ndarray:
     """(n,) mm: how far the profile lies below its chord at ±L of arc (the largest over the
     scales ``L``); negative where it lies above (convex).  NaN where the profile is NaN.
@@ -470,21 +434,21 @@ def notch_depth(theta_rad, profile_mm, *, scales_mm=DEFAULT_NOTCH_SCALES_MM,
     return out
 
 
-def reject_spurious(result: InverseResult, *, fade_margin_mm: float = DEFAULT_FADE_MARGIN_MM,
-                    fade_gap_mm: float = DEFAULT_FADE_GAP_MM,
-                    notch_depth_mm: float | None = DEFAULT_NOTCH_DEPTH_MM,
-                    notch_scales_mm=DEFAULT_NOTCH_SCALES_MM,
-                    convex_reach_mm: float = DEFAULT_CONVEX_REACH_MM,
-                    convex_fraction: float = DEFAULT_CONVEX_FRACTION,
+def reject_spurious(result: InverseResult, *, fade_margin_mm: float = TOLERANCES.fade_margin_mm,
+                    fade_gap_mm: float = TOLERANCES.fade_gap_mm,
+                    notch_depth_mm: float | None = TOLERANCES.notch_depth_mm,
+                    notch_scales_mm=TOLERANCES.notch_scales_mm,
+                    convex_reach_mm: float = TOLERANCES.convex_reach_mm,
+                    convex_fraction: float = TOLERANCES.convex_fraction,
                     axial_slope=None,
-                    max_axial_slope: float = DEFAULT_MAX_AXIAL_SLOPE,
-                    round_tol_mm: float = DEFAULT_ROUND_TOL_MM,
-                    short_gap_mm: float = DEFAULT_SHORT_GAP_MM,
-                    short_margin_mm: float = DEFAULT_SHORT_MARGIN_MM,
-                    notch_round_tol_mm: float = DEFAULT_NOTCH_ROUND_TOL_MM,
+                    max_axial_slope: float = TOLERANCES.max_axial_slope,
+                    round_tol_mm: float = TOLERANCES.round_tol_mm,
+                    short_gap_mm: float = TOLERANCES.short_gap_mm,
+                    short_margin_mm: float = TOLERANCES.short_margin_mm,
+                    notch_round_tol_mm: float = TOLERANCES.notch_round_tol_mm,
                     flank_slope=None,
-                    max_flank_slope: float | None = DEFAULT_MAX_FLANK_SLOPE,
-                    min_flank_arc_mm: float = DEFAULT_MIN_FLANK_ARC_MM) -> InverseResult:
+                    max_flank_slope: float | None = TOLERANCES.max_flank_slope,
+                    min_flank_arc_mm: float = TOLERANCES.min_flank_arc_mm) -> InverseResult:
     """The result with fading points flagged ``FADING`` and points in a notch ``NOTCH`` (see
     the module docstring), both dropped from the valid points.
 
@@ -573,7 +537,7 @@ def _comparable(results, zs, keys, profs, k: int, j: int) -> bool:
 
 
 def screw_rate(results, z_mm, *, frames=None,
-               max_shift_deg: float = DEFAULT_MAX_SCREW_SHIFT_DEG, _profiles=None) -> float:
+               max_shift_deg: float = TOLERANCES.max_screw_shift_deg, _profiles=None) -> float:
     """rad/mm: how fast the sections' profiles turn about the axis along the scan (a cable's
     lay, a helical groove's lead), 0 for a surface of revolution or a prism.
 
@@ -643,7 +607,7 @@ def axial_slopes(results, z_mm, *, frames=None, _profiles=None) -> list:
 
 
 def flank_slopes(results, z_mm, *, frames=None, _profiles=None, _screw=None,
-                 min_change: float = DEFAULT_MAX_FLANK_SLOPE) -> list:
+                 min_change: float = TOLERANCES.max_flank_slope) -> list:
     """Per section, ``|dr/dz|`` per θ to *both* neighbours (the smaller of the two sides; NaN
     where a side is unknown, so never at a scan's ends) where the section lies on a *short*
     flank (:data:`Quality.FLANK`), 0 elsewhere.
@@ -708,20 +672,20 @@ def _fmax_rows(a: np.ndarray) -> np.ndarray:
 
 
 def reject_scan(results, z_mm, *, frames=None, continuity_k: float | None = None,
-                neighbour_dilation: int | None = DEFAULT_NEIGHBOUR_DILATION, **kwargs) -> list:
+                neighbour_dilation: int | None = TOLERANCES.neighbour_dilation, **kwargs) -> list:
     """:func:`reject_spurious` (then :func:`reject_discontinuous` with ``continuity_k``) on
     every section of a scan, with each section's axial slope from its neighbours
     (:func:`axial_slopes`), so that a faded stretch on a convex, axially straight surface is
     kept (:func:`convex_gaps`), and its slope to both neighbours (:func:`flank_slopes`), so
     that a section on a flank is flagged ``FLANK``; then :func:`reject_like_neighbours`
     (``neighbour_dilation``; ``None``: off).  ``notch_depth_mm`` defaults to
-    :data:`DEFAULT_SCAN_NOTCH_DEPTH_MM` here (a scan keeps round sections out of ``NOTCH``)."""
+    :attr:`RejectionTolerances.scan_notch_depth_mm` here (a scan keeps round sections out of ``NOTCH``)."""
     profs = _scan_profiles(results)  # once for all
     screw = screw_rate(results, z_mm, frames=frames, _profiles=profs)
     slopes = axial_slopes(results, z_mm, frames=frames, _profiles=profs)
     flanks = flank_slopes(results, z_mm, frames=frames, _profiles=profs, _screw=screw)
     out = []
-    kwargs.setdefault("notch_depth_mm", DEFAULT_SCAN_NOTCH_DEPTH_MM)
+    kwargs.setdefault("notch_depth_mm", TOLERANCES.scan_notch_depth_mm)
     for res, sl, fl in zip(results, slopes, flanks):
         r = reject_spurious(res, axial_slope=sl, flank_slope=fl, **kwargs)
         out.append(r if continuity_k is None else reject_discontinuous(r, k=continuity_k))
@@ -730,7 +694,7 @@ def reject_scan(results, z_mm, *, frames=None, continuity_k: float | None = None
     return reject_like_neighbours(out, z_mm, frames=frames, screw_rad_per_mm=screw,
                                   profiles=profs, dilation=neighbour_dilation,
                                   round_tol_mm=kwargs.get("notch_round_tol_mm",
-                                                          DEFAULT_NOTCH_ROUND_TOL_MM))
+                                                          TOLERANCES.notch_round_tol_mm))
 
 
 #: What a neighbouring section's row must have been flagged for :func:`reject_like_neighbours`.
@@ -738,8 +702,8 @@ _NEIGHBOUR_CODES = (Quality.FADING, Quality.NOTCH, Quality.HIDDEN, Quality.FLANK
 
 
 def reject_like_neighbours(results, z_mm, *, frames=None, screw_rad_per_mm: float = 0.0,
-                           profiles=None, dilation: int = DEFAULT_NEIGHBOUR_DILATION,
-                           round_tol_mm: float = DEFAULT_NOTCH_ROUND_TOL_MM) -> list:
+                           profiles=None, dilation: int = TOLERANCES.neighbour_dilation,
+                           round_tol_mm: float = TOLERANCES.notch_round_tol_mm) -> list:
     """The scan's results with a view's valid point flagged ``NEIGHBOURS`` where both
     neighbouring sections (same frame, same θ grid), turned back by the screw rate, rejected
     that θ (± ``dilation`` samples) in the same view as ``FADING``, ``NOTCH``, ``HIDDEN`` or

@@ -34,6 +34,7 @@ import numpy as np
 
 from lts360.geometry.camera import project_camera_points
 from lts360.geometry.mirror import mirror_matrix, transform_plane
+from lts360.geometry.mirror_path import PathMirror, path_valid, quad_extent
 from lts360.recon.calibration.model import Calibration
 
 __all__ = ["View", "make_views", "get_views", "view_transform", "project_meas_points",
@@ -43,7 +44,6 @@ DIRECT = "direct"
 DEFAULT_MAX_INCIDENCE_DEG = 80.0
 #: Radii tested across the grid's range when deriving windows (both ends and the middle).
 DEFAULT_WINDOW_RADII = 3
-_EPS_MM = 1e-9
 
 
 @dataclass(frozen=True, eq=False)
@@ -147,100 +147,29 @@ def project_meas_points(points_meas_mm, cal: Calibration, view: View) -> np.ndar
 
 # -- windows -----------------------------------------------------------------------------------
 
-@dataclass(frozen=True)
-class _MeasMirror:
-    name: str
-    n: np.ndarray            # (3,) unit normal, towards the reflecting side
-    d: float
-    T: np.ndarray            # (4, 4) mirror matrix in the measurement frame
-    corners: np.ndarray | None  # (4, 3)
-
-
-def _mirrors_in_meas(cal: Calibration) -> dict[str, _MeasMirror]:
+def _mirrors_in_meas(cal: Calibration) -> dict[str, PathMirror]:
+    """The calibrated mirrors in the measurement frame, as the path test sees them (their
+    corners where the calibration knows them, else an unknown extent)."""
     T_mc = cal.T_meas_cam
     out = {}
     for m in cal.mirrors:
         n, d = transform_plane(m.n, m.d_mm, T_mc[:3, :3], T_mc[:3, 3])
         corners = None if m.corners_mm is None else m.corners_mm @ T_mc[:3, :3].T + T_mc[:3, 3]
-        out[m.name] = _MeasMirror(m.name, n, d, mirror_matrix(n, d), corners)
+        out[m.name] = PathMirror(n=n, d=d, T=mirror_matrix(n, d),
+                                 contains=None if corners is None else quad_extent(corners, n))
     return out
 
 
-def _inside_quad(points: np.ndarray, m: _MeasMirror) -> np.ndarray:
-    """Whether points on the plane of ``m`` lie inside its convex quadrilateral.
-
-    Always True for a mirror of unknown extent.
-    """
-    if m.corners is None:
-        return np.ones(len(points), dtype=bool)
-    c = m.corners
-    signs = []
-    for i in range(4):
-        edge = c[(i + 1) % 4] - c[i]
-        signs.append(np.cross(edge, points - c[i]) @ m.n)
-    s = np.stack(signs, axis=1)
-    return np.all(s >= -1e-9, axis=1) | np.all(s <= 1e-9, axis=1)
-
-
-def _blocked_by_cylinder(a: np.ndarray, b: np.ndarray, radius_mm: float) -> np.ndarray:
-    """Segments a→b (n, 3) that pass strictly inside the infinite cylinder of radius r about z."""
-    a2, d = a[:, :2], b[:, :2] - a[:, :2]
-    dd = np.einsum("ij,ij->i", d, d)
-    t = np.clip(-np.einsum("ij,ij->i", a2, d) / np.maximum(dd, 1e-300), 0.0, 1.0)
-    closest = a2 + t[:, None] * d
-    return np.einsum("ij,ij->i", closest, closest) < radius_mm**2 * (1.0 - 1e-9)
-
-
-def _blocked_by_mirrors(a: np.ndarray, b: np.ndarray, mirrors: dict[str, _MeasMirror],
-                        skip: set[str]) -> np.ndarray:
-    """Segments a→b crossing the rectangle of a mirror of known extent (other than ``skip``)."""
-    blocked = np.zeros(len(a), dtype=bool)
-    for name, m in mirrors.items():
-        if name in skip or m.corners is None:
-            continue
-        da, db = a @ m.n - m.d, b @ m.n - m.d
-        crosses = da * db < 0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(crosses, da / (da - db), 0.0)
-        blocked |= crosses & _inside_quad(a + t[:, None] * (b - a), m)
-    return blocked
-
-
 def _path_ok(points: np.ndarray, camera: np.ndarray, seq: tuple[str, ...],
-             mirrors: dict[str, _MeasMirror], radius_mm: float) -> tuple[np.ndarray, np.ndarray]:
-    """Fold the straight path from points to the virtual camera at each mirror of ``seq``.
-
-    Returns the validity (mirror hits on the reflecting side and inside known extents, no
-    blocking) and the unit direction in which the path leaves the points.
-    """
-    virtual = camera.copy()
-    for name in reversed(seq):  # virtual camera T_{m_1} ⋯ T_{m_k} C
-        T = mirrors[name].T
-        virtual = T[:3, :3] @ virtual + T[:3, 3]
-    direction = virtual - points
-    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    leave = direction.copy()
-    ok = np.ones(len(points), dtype=bool)
-    p = points
-    prev: str | None = None
-    for name in seq:
-        m = mirrors[name]
-        denom = direction @ m.n
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (m.d - p @ m.n) / denom
-        ok &= (denom < 0) & (t > _EPS_MM)
-        t = np.where(ok, t, 0.0)
-        hit = p + t[:, None] * direction
-        ok &= _inside_quad(hit, m)
-        if prev is not None:  # the first segment leaves the surface: the facing test covers it
-            ok &= ~_blocked_by_cylinder(p, hit, radius_mm)
-        ok &= ~_blocked_by_mirrors(p, hit, mirrors, {name} | ({prev} if prev else set()))
-        direction = direction - 2.0 * (direction @ m.n)[:, None] * m.n
-        p, prev = hit, name
-    end = np.broadcast_to(camera, p.shape)
-    if prev is not None:
-        ok &= ~_blocked_by_cylinder(p, end, radius_mm)
-    ok &= ~_blocked_by_mirrors(p, end, mirrors, {prev} if prev else set())
+             mirrors: dict[str, PathMirror], radius_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """The path test (:func:`lts360.geometry.mirror_path.path_valid`) from points to the
+    camera through the named mirrors; the segment that leaves the surface is left to the
+    windows' facing test.  Returns the validity and the unit direction in which the path
+    leaves the points."""
+    names = list(mirrors)
+    ok, leave, _ = path_valid(points, camera, [names.index(n) for n in seq],
+                              [mirrors[n] for n in names], radius_mm,
+                              occlude_first_segment=False)
     return ok, leave
 
 

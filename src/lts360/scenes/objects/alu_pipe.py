@@ -18,20 +18,16 @@ import numpy as np
 from lts360.scenes.materials import get_material
 from lts360.scenes.objects._params import check_less, check_range
 from lts360.scenes.objects.base import Placement, SceneObject
-from lts360.scenes.objects.mesher import n_theta_for_tolerance, star_mesh, zoned_z_grid
-from lts360.scenes.objects.registry import ObjectType, canonical_spec, register
+from lts360.scenes.objects.mesher import n_theta_for_tolerance
+from lts360.scenes.objects.registry import ObjectType, register
+from lts360.scenes.objects.zoned import MESH_SAFETY, zone_half_mm, zoned_star_object
 
 NAME = "alu-pipe"
 #: The paper's scan of this object (Fig. 12).
 SECTIONS = 26
 PITCH_MM = 0.68
 #: Half-length of the measured zone: the scan centred on z = 0 plus 0.5 mm either side.
-ZONE_HALF_MM = (SECTIONS - 1) * PITCH_MM / 2.0 + 0.5
-#: Share of ``mesh_tolerance_mm`` spent by the second-order error estimate (half along θ,
-#: half along z); the rest covers higher-order terms and radial-vs-normal distance.
-_SAFETY = 0.9
-#: Axial step outside the measured zone, in multiples of the step inside it.
-_COARSE_FACTOR = 4.0
+ZONE_HALF_MM = zone_half_mm(SECTIONS, PITCH_MM)
 
 
 @dataclass(frozen=True)
@@ -131,7 +127,7 @@ class AluPipeParams:
             r2 = -n * n * q * np.cos(a)
             kappa = np.abs(r * r + 2.0 * r1 * r1 - r * r2) / (r * r + r1 * r1) ** 1.5
             r_eq = max(r_eq, float(np.max(kappa * (r * r + r1 * r1))))
-        budget = _SAFETY * self.mesh_tolerance_mm / 2.0
+        budget = MESH_SAFETY * self.mesh_tolerance_mm / 2.0
         n_theta = n_theta_for_tolerance(r_eq, budget)
         k_z = self.waviness_amplitude_mm * (2.0 * np.pi / self.waviness_wavelength_mm) ** 2
         dz = math.sqrt(8.0 * budget / k_z) if k_z > 0 else 2.0 * ZONE_HALF_MM
@@ -150,23 +146,13 @@ class AluPipeParams:
         SceneObject
         """
         n_theta, dz = self._resolution()
-        psi = np.arange(n_theta) * (2.0 * np.pi / n_theta)
-        h, zone = self.length_mm / 2.0, ZONE_HALF_MM
-        coarse = _COARSE_FACTOR * dz
-        z = zoned_z_grid(h, zone, dz, _COARSE_FACTOR)
-        mesh = star_mesh(self.radius, psi, z, radius_in=self.inner_radius)
-        return SceneObject(
-            name=NAME, spec=canonical_spec(NAME, self, placement), params=self.__dict__.copy(),
-            mesh_object=mesh, placement=placement, material=get_material(self.material),
-            radius_fn=self.radius, measured_zone_z_mm=(-zone, zone),
-            mesh_tolerance_mm=self.mesh_tolerance_mm, sections=SECTIONS, pitch_mm=PITCH_MM,
+        return zoned_star_object(
+            NAME, self, placement, radius=self.radius, inner_radius=self.inner_radius,
+            n_theta=n_theta, dz_mm=dz, length_mm=self.length_mm, sections=SECTIONS,
+            pitch_mm=PITCH_MM,
             description=(f"aluminium pipe Ø{self.outer_diameter_mm} mm with undulations "
                          f"(±{self.waviness_amplitude_mm} mm / {self.waviness_wavelength_mm} mm, "
-                         f"{self.lobes} lobes ±{self.lobe_amplitude_mm} mm)"),
-            notes={"n_theta": n_theta, "n_z": int(z.size), "dz_zone_mm": dz,
-                   "dz_outside_mm": coarse,
-                   "error_bound_outside_zone_mm": _COARSE_FACTOR ** 2 / 2.0 * _SAFETY
-                   * self.mesh_tolerance_mm + _SAFETY * self.mesh_tolerance_mm / 2.0})
+                         f"{self.lobes} lobes ±{self.lobe_amplitude_mm} mm)"))
 
 
 register(ObjectType(NAME, "Ø22 mm aluminium pipe with undulations (paper Fig. 12)",

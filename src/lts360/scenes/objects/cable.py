@@ -46,6 +46,7 @@ from lts360.scenes.objects._params import check_range
 from lts360.scenes.objects.base import Placement, SceneObject
 from lts360.scenes.objects.mesher import helical_resolution, helical_star_mesh
 from lts360.scenes.objects.registry import ObjectType, canonical_spec, register
+from lts360.scenes.objects.zoned import MESH_SAFETY
 
 __all__ = ["CableParams", "StrandSection"]
 
@@ -55,10 +56,6 @@ NAME = "cable"
 SCANS = {"cable": (39, 0.34), "cable-6": (40, 0.34), "cable-8": (39, 0.34)}
 #: Number of layers (centre wire included) of each allowed strand count.
 LAYERS = {7: 2, 19: 3, 37: 4}
-#: Share of ``mesh_tolerance_mm`` given to the second-order error bound of
-#: :func:`~lts360.scenes.objects.mesher.helical_resolution`; the rest covers
-#: higher-order terms.
-_SAFETY = 0.9
 #: Dense samples of one wire's profile, to measure its curvature.
 _DENSE = 4001
 #: Newton iterations on ``Θ(ω) = |φ|`` (quadratic convergence from a tabulated guess; a
@@ -309,7 +306,7 @@ class CableParams:
         phi_w = sec.theta(w)
         phi_w[0], phi_w[-1] = -math.pi / sec.n_wires, math.pi / sec.n_wires
         one, dz = helical_resolution([(w, phi_w, sec.radius(w))], tau,
-                                     _SAFETY * self.mesh_tolerance_mm)
+                                     MESH_SAFETY * self.mesh_tolerance_mm)
         period = 2.0 * math.pi / sec.n_wires
         phi0 = math.radians(self.strand_phase_deg)
         nodes = (phi0 + (np.arange(sec.n_wires) * period)[:, None] + one[None, :]).ravel()

@@ -23,6 +23,7 @@ from lts360.scenes.objects._params import check_less, check_range
 from lts360.scenes.objects.base import Placement, SceneObject
 from lts360.scenes.objects.mesher import star_mesh
 from lts360.scenes.objects.registry import ObjectType, canonical_spec, register
+from lts360.scenes.objects.zoned import zone_half_mm
 
 __all__ = ["CubeParams"]
 
@@ -31,7 +32,7 @@ NAME = "cube"
 SECTIONS = 25
 PITCH_MM = 0.68
 #: Half-length of the measured zone: the scan centred on z = 0 plus 0.5 mm either side.
-ZONE_HALF_MM = (SECTIONS - 1) * PITCH_MM / 2.0 + 0.5
+ZONE_HALF_MM = zone_half_mm(SECTIONS, PITCH_MM)
 #: Faces the groove may be cut into, by the angle of their outward normal.
 _FACES_DEG = (0.0, 90.0, 180.0, 270.0)
 

@@ -27,13 +27,14 @@ from lts360.scenes.objects._params import check_less, check_range
 from lts360.scenes.objects.base import Placement, SceneObject
 from lts360.scenes.objects.mesher import n_theta_for_tolerance, star_mesh, z_grid
 from lts360.scenes.objects.registry import ObjectType, canonical_spec, register
+from lts360.scenes.objects.zoned import zone_half_mm
 
 NAME = "cut-tube"
 #: The paper's scan of this object (Fig. 18).
 SECTIONS = 25
 PITCH_MM = 0.68
 #: Half-length of the measured zone: the scan centred on z = 0 plus 0.5 mm either side.
-ZONE_HALF_MM = (SECTIONS - 1) * PITCH_MM / 2.0 + 0.5
+ZONE_HALF_MM = zone_half_mm(SECTIONS, PITCH_MM)
 #: Largest axial step of the (straight) tube wall (keeps the triangles' aspect moderate).
 _MAX_STEP_MM = 2.0
 #: Closest approach of the cut plane to either end of the tube.

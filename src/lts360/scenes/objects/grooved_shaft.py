@@ -29,6 +29,7 @@ from lts360.scenes.objects._params import check_less, check_range
 from lts360.scenes.objects.base import Placement, SceneObject
 from lts360.scenes.objects.mesher import helical_resolution, helical_star_mesh
 from lts360.scenes.objects.registry import ObjectType, canonical_spec, register
+from lts360.scenes.objects.zoned import MESH_SAFETY, zone_half_mm
 
 __all__ = ["GroovedShaftParams"]
 
@@ -37,10 +38,7 @@ NAME = "grooved-shaft"
 SECTIONS = 20
 PITCH_MM = 0.68
 #: Half-length of the measured zone: the scan centred on z = 0 plus 0.5 mm either side.
-ZONE_HALF_MM = (SECTIONS - 1) * PITCH_MM / 2.0 + 0.5
-#: Share of ``mesh_tolerance_mm`` given to the second-order error bound of
-#: :func:`~lts360.scenes.objects.mesher.helical_resolution`; the rest covers higher-order terms.
-_SAFETY = 0.9
+ZONE_HALF_MM = zone_half_mm(SECTIONS, PITCH_MM)
 #: Dense samples per smooth piece of a profile, to measure its curvature.
 _DENSE = 4001
 _HANDEDNESS = ("right", "left")
@@ -161,7 +159,7 @@ class GroovedShaftParams:
         SceneObject
         """
         tau = self.twist_rad_per_mm
-        phi, dz = helical_resolution(self._pieces(), tau, _SAFETY * self.mesh_tolerance_mm)
+        phi, dz = helical_resolution(self._pieces(), tau, MESH_SAFETY * self.mesh_tolerance_mm)
         h = self.length_mm / 2.0
         z = np.linspace(-h, h, math.ceil(self.length_mm / dz - 1e-9) + 1)
         mesh = helical_star_mesh(self.profile, phi, z, tau)

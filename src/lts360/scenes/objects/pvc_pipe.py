@@ -20,20 +20,16 @@ import numpy as np
 from lts360.scenes.materials import get_material
 from lts360.scenes.objects._params import check_less, check_range
 from lts360.scenes.objects.base import Placement, SceneObject
-from lts360.scenes.objects.mesher import n_theta_for_tolerance, star_mesh, zoned_z_grid
-from lts360.scenes.objects.registry import ObjectType, canonical_spec, register
+from lts360.scenes.objects.mesher import n_theta_for_tolerance
+from lts360.scenes.objects.registry import ObjectType, register
+from lts360.scenes.objects.zoned import MESH_SAFETY, zone_half_mm, zoned_star_object
 
 NAME = "pvc-pipe"
 #: The paper's scan of this object (Fig. 11).
 SECTIONS = 26
 PITCH_MM = 0.68
 #: Half-length of the measured zone: the scan centred on z = 0 plus 0.5 mm either side.
-ZONE_HALF_MM = (SECTIONS - 1) * PITCH_MM / 2.0 + 0.5
-#: Share of ``mesh_tolerance_mm`` spent by the second-order error estimate (half along θ,
-#: half along z); the rest covers higher-order terms and radial-vs-normal distance.
-_SAFETY = 0.9
-#: Axial step outside the measured zone, in multiples of the step inside it.
-_COARSE_FACTOR = 4.0
+ZONE_HALF_MM = zone_half_mm(SECTIONS, PITCH_MM)
 
 
 @dataclass(frozen=True)
@@ -154,7 +150,7 @@ class PvcPipeParams:
         r_sz = self.dent_depth_mm * np.max(np.abs(g1)) / r_min * math.exp(-0.5) / sz
         r_zz = self.dent_depth_mm / sz ** 2
         r_max = R + q
-        budget = _SAFETY * self.mesh_tolerance_mm / 2.0
+        budget = MESH_SAFETY * self.mesh_tolerance_mm / 2.0
         n_theta = n_theta_for_tolerance(r_eq + r_sz * r_max ** 2, budget)
         k_z = r_zz + r_sz
         dz = math.sqrt(8.0 * budget / k_z) if k_z > 0 else 2.0 * ZONE_HALF_MM
@@ -173,22 +169,12 @@ class PvcPipeParams:
         SceneObject
         """
         n_theta, dz = self._resolution()
-        psi = np.arange(n_theta) * (2.0 * np.pi / n_theta)
-        h, zone = self.length_mm / 2.0, ZONE_HALF_MM
-        coarse = _COARSE_FACTOR * dz
-        z = zoned_z_grid(h, zone, dz, _COARSE_FACTOR)
-        mesh = star_mesh(self.radius, psi, z, radius_in=self.inner_radius)
-        return SceneObject(
-            name=NAME, spec=canonical_spec(NAME, self, placement), params=self.__dict__.copy(),
-            mesh_object=mesh, placement=placement, material=get_material(self.material),
-            radius_fn=self.radius, measured_zone_z_mm=(-zone, zone),
-            mesh_tolerance_mm=self.mesh_tolerance_mm, sections=SECTIONS, pitch_mm=PITCH_MM,
+        return zoned_star_object(
+            NAME, self, placement, radius=self.radius, inner_radius=self.inner_radius,
+            n_theta=n_theta, dz_mm=dz, length_mm=self.length_mm, sections=SECTIONS,
+            pitch_mm=PITCH_MM,
             description=(f"1\" PVC pipe Ø{self.outer_diameter_mm} mm × {self.wall_mm} mm, "
-                         f"ovality {self.ovality_mm} mm, dent {self.dent_depth_mm} mm"),
-            notes={"n_theta": n_theta, "n_z": int(z.size), "dz_zone_mm": dz,
-                   "dz_outside_mm": coarse,
-                   "error_bound_outside_zone_mm": _COARSE_FACTOR ** 2 / 2.0 * _SAFETY
-                   * self.mesh_tolerance_mm + _SAFETY * self.mesh_tolerance_mm / 2.0})
+                         f"ovality {self.ovality_mm} mm, dent {self.dent_depth_mm} mm"))
 
 
 register(ObjectType(NAME, "1\" PVC pipe, deformed: ovalised with a local dent (paper Fig. 11)",

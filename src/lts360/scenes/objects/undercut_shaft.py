@@ -20,16 +20,14 @@ from lts360.scenes.objects._params import check_range
 from lts360.scenes.objects.base import Placement, SceneObject
 from lts360.scenes.objects.mesher import n_theta_for_tolerance, star_mesh, z_grid
 from lts360.scenes.objects.registry import ObjectType, canonical_spec, register
+from lts360.scenes.objects.zoned import MESH_SAFETY, zone_half_mm
 
 NAME = "undercut-shaft"
 #: The paper's scan of this object (Fig. 17).
 SECTIONS = 25
 PITCH_MM = 0.68
 #: Half-length of the measured zone: the scan centred on z = 0 plus 0.5 mm either side.
-ZONE_HALF_MM = (SECTIONS - 1) * PITCH_MM / 2.0 + 0.5
-#: Share of ``mesh_tolerance_mm`` spent by the second-order error estimate (half along θ,
-#: half along z); the rest covers higher-order terms and radial-vs-normal distance.
-_SAFETY = 0.9
+ZONE_HALF_MM = zone_half_mm(SECTIONS, PITCH_MM)
 #: Largest axial step where the profile is straight (keeps the triangles' aspect moderate).
 _MAX_STEP_MM = 2.0
 #: Widest groove accepted.
@@ -148,7 +146,7 @@ class UndercutShaftParams:
         interpolation error ``|f''| Δz² / 8`` with ``|f''| ≤ 1 / (ρ cos³ φ_e)`` on a fillet
         (zero elsewhere: the profile is straight); each gets half the budget.
         """
-        budget = _SAFETY * self.mesh_tolerance_mm / 2.0
+        budget = MESH_SAFETY * self.mesh_tolerance_mm / 2.0
         n_theta = n_theta_for_tolerance(self.diameter_mm / 2.0, budget)
         f2 = 1.0 / (self.fillet_radius_mm * math.cos(self._fillet_end_angle_rad()) ** 3)
         return n_theta, math.sqrt(8.0 * budget / f2)
