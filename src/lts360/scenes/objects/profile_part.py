@@ -36,6 +36,9 @@ NAME = "profile"
 SUFFIXES = (".dxf", ".csv")
 #: Margin of the measured zone from either end (mm), as for the plug gauge.
 END_MARGIN_MM = 1.0
+#: Slack on the edge parameter λ ∈ [0, 1]: a ray through a vertex must hit one of its two
+#: edges despite rounding (moves a hit by at most 1e-10 of an edge's length).
+_LAM_SLACK = 1e-10
 #: Largest (queries × edges) block of the vectorised ray–polygon intersection.
 _BLOCK = 4_000_000
 
@@ -64,7 +67,7 @@ def polygon_radius(ring_xy_mm: np.ndarray, theta_rad: np.ndarray) -> np.ndarray:
         with np.errstate(divide="ignore", invalid="ignore"):
             t = a_x_d[None, :] / den
             lam = (a[None, :, 0] * s - a[None, :, 1] * c) / den  # (a × u) / (u × d)
-        hit = (den != 0) & (t > 0) & (lam >= 0) & (lam <= 1)
+        hit = (den != 0) & (t > 0) & (lam >= -_LAM_SLACK) & (lam <= 1.0 + _LAM_SLACK)
         best = np.where(hit, t, -np.inf).max(axis=1)
         out[k:k + step] = np.where(np.isfinite(best), best, np.nan)
     return out.reshape(theta.shape)
