@@ -10,6 +10,7 @@ star-shaped about the axis (:class:`lts360.scenes.objects.part.MeshRadius`).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -80,8 +81,6 @@ class MeshPartParams:
 
     def build(self, placement: Placement = Placement()) -> SceneObject:
         """Read, check and place the part; its truth is the mesh itself."""
-        from pathlib import Path
-
         record = source_record(Path(self.path))
         mesh = load_part_mesh(self.path, self.units)
         z0, z1 = (float(v) for v in mesh.bounds[:, 2])
