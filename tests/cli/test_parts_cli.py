@@ -104,14 +104,18 @@ def test_a_frame_folder_scores_without_the_original_file(variant, tmp_path, caps
     xy = np.vstack([hex_ring(), hex_ring()[:1]])
     path.write_text("x_mm,y_mm\n" + "\n".join(f"{x!r},{y!r}" for x, y in xy.tolist()) + "\n")
     spec = f"profile:path={path},length=30,x=0.5"
-    _, _, _, out = render(tmp_path, "f", spec)
-    frame = json.loads((out / "frame.json").read_text())
-    assert frame["object"]["part"]["file"] == "part.csv"
-    assert (out / "part.csv").read_bytes() == path.read_bytes()
+    out = tmp_path / "scan"
+    assert main(["render", "--object", spec, "--out", str(out), *FAST, "--sections", "2",
+                 "--pitch-mm", "0.5"]) == 0
+    for section in ("section_0000", "section_0001"):  # each frame folder holds its own copy
+        frame = json.loads((out / section / "frame.json").read_text())
+        assert frame["object"]["part"]["file"] == "part.csv"
+        assert (out / section / "part.csv").read_bytes() == path.read_bytes()
     path.unlink()
     obj, zs = load_truth(out)
-    assert obj.name == "profile" and zs == [0.0]
-    rendered = trimesh.load(out / "truth.ply", process=False)  # the mesh as rendered (world)
+    assert obj.name == "profile" and zs == [-0.25, 0.25]
+    rendered = trimesh.load(out / "section_0000" / "truth.ply", process=False)  # world, staged
+    rendered.apply_translation([0.0, 0.0, zs[0]])  # undo the stage's move
     assert np.abs(rendered.vertices - obj.mesh_world().vertices).max() < 2e-6  # PLY: float32
     th = np.linspace(-np.pi, np.pi, 361)
     r = obj.radius_fn(th, np.zeros_like(th))

@@ -44,7 +44,12 @@ def measured(tmp_path_factory):
                      "--out", str(c)]) == 0
         assert main(["score", str(c), "--truth", str(f), "--out", str(s)]) == 0
         out[name] = (f, c, json.loads(s.read_text()))
-    (root / "hex.stl").unlink()  # scored again below from the frame folder's own copy
+    (root / "hex.stl").unlink()  # from here on the frame folder's own copy is the truth
+    f, c, _ = out["stl"]
+    assert main(["inspect", str(c), "--out", str(root / "report"), "--nominal",
+                 str(root / "hex.dxf"), "--tolerance-mm", "0.4", "--truth", str(f),
+                 "--calibration", str(f / "frame.json")]) == 0
+    out["inspection"] = json.loads((root / "report" / "inspection.json").read_text())
     return out
 
 
@@ -86,3 +91,14 @@ def test_away_from_the_corners_the_bar_measures_like_the_gauge(measured):
     gauge = measured["gauge"][2]["mesh_distance"]["rms_mm"]
     assert np.sqrt(np.mean(err[flats] ** 2)) <= 1.5 * gauge
     assert np.sqrt(np.mean(err[~flats] ** 2)) > np.sqrt(np.mean(err[flats] ** 2))
+
+
+def test_inspect_gives_the_true_section_of_the_part(measured):
+    """``inspect --truth`` cuts the part's own truth (the STL's copy in the frame folder) by the
+    sheet's plane."""
+    s = measured["inspection"]["sections"][0]
+    truth = s["truth"]
+    # the true section is sampled every 0.1° (D min 48 nm over 16 mm, measured 2026-12-04): 0.1 µm
+    assert truth["d_min_mm"] == pytest.approx(16.0, abs=1e-4)
+    # the measured LS diameter within its own U of the true one (the corners are rounded)
+    assert abs(s["d_ls_mm"]["value"] - truth["d_ls_mm"]) <= s["d_ls_mm"]["U_k2"]
