@@ -40,7 +40,7 @@ END_MARGIN_MM = 1.0
 #: edges despite rounding (moves a hit by at most 1e-10 of an edge's length).
 _LAM_SLACK = 1e-10
 #: Largest (queries × edges) block of the vectorised ray–polygon intersection.
-_BLOCK = 4_000_000
+_BLOCK = 1_000_000
 
 
 def read_section(path, where: str = NAME) -> np.ndarray:
