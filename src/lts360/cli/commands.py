@@ -19,7 +19,8 @@ def cmd_objects(args) -> int:
         print(f"{name:16s} {entry.description}")
         for field, default, alias in entry.parameters():
             al = f" ({alias})" if alias else ""
-            print(f"    {field + al:32s} = {default}")
+            shown = "(required: your file)" if entry.from_file and field == "path" else default
+            print(f"    {field + al:32s} = {shown}")
     print("placement (every object): x_mm (x), y_mm (y), tilt_deg, tilt_azimuth_deg")
     return 0
 
@@ -69,6 +70,7 @@ def cmd_render(args) -> int:
     import json
 
     from lts360.scenes.objects import build_object
+    from lts360.scenes.objects.part import check_in_field
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import simulate_frame, write_frame
 
@@ -89,6 +91,8 @@ def cmd_render(args) -> int:
         raise UsageError(f"--pitch-mm: must be > 0 for a scan, got {args.pitch_mm}")
     rig = load_rig(args.rig)
     obj = build_object(args.object)
+    if obj.notes.get("part"):  # a user's part: it must fit between the mirrors
+        check_in_field(obj, rig)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UsageError(f"--out: {str(out)!r} exists and is not a directory")

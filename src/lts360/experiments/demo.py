@@ -105,8 +105,8 @@ def run_demo(out: Path, *, radius_mm: float = 10.0, rig_name: str = "paper", ren
     sections = {}
     echo(f"\n{'object':16s} {'vertices':>9s} {'faces':>9s} watertight  build")
     theta = np.linspace(-np.pi, np.pi, 3601)
-    for name in object_types():
-        if name == "cable":  # generic entry, same defaults as cable-8
+    for name, entry in object_types().items():
+        if name == "cable" or entry.from_file:  # generic cable = cable-8; a part needs its file
             continue
         t = time.perf_counter()
         obj = build_object(name)

@@ -21,7 +21,8 @@ import numpy as np
 from lts360.geometry.fit import fit_circle
 from lts360.recon.triangulation.cloud import VIEW_NAMES, Cloud
 from lts360.recon.triangulation.reject import rejection_counts
-from lts360.scenes.objects import SceneObject, build_object
+from lts360.scenes.objects import SceneObject
+from lts360.scenes.objects.catalog import object_from_truth
 
 __all__ = ["true_radius_band", "load_truth", "load_rig_truth", "signed_mesh_distance",
            "score_cloud", "error_stats", "measurable"]
@@ -120,15 +121,17 @@ def load_truth(truth_dir) -> tuple[SceneObject, list[float]]:
     d = Path(truth_dir)
     if (d / "scan.json").is_file():
         scan = json.loads((d / "scan.json").read_text())
-        frames = [json.loads((d / s["dir"] / "frame.json").read_text()) for s in scan["sections"]]
+        dirs = [d / s["dir"] for s in scan["sections"]]
     elif (d / "frame.json").is_file():
-        frames = [json.loads((d / "frame.json").read_text())]
+        dirs = [d]
     else:
         raise ValueError(f"--truth: {str(d)!r} holds neither frame.json nor scan.json")
+    frames = [json.loads((f / "frame.json").read_text()) for f in dirs]
     specs = {f["object"]["spec"] for f in frames}
     if len(specs) != 1:
         raise ValueError(f"--truth: the frames hold different objects: {sorted(specs)}")
-    return build_object(specs.pop()), [float(f["stage"]["z_mm"]) for f in frames]
+    return (object_from_truth(frames[0]["object"], dirs[0]),
+            [float(f["stage"]["z_mm"]) for f in frames])
 
 
 def load_rig_truth(truth_dir) -> dict:

@@ -5,12 +5,9 @@ Three sources, each giving a closed contour ``(m, 2)`` in mm:
 * an **object spec** (``pvc-pipe:ovality=0,dent_depth=0``): the generator's analytic radius
   ``r(θ, z)`` at the spec's parameters, sampled at each section's z (the shape the generator
   was asked for, not a rendered truth; a placement in the spec is ignored);
-* a **CSV** file of ``x, y`` rows; an optional header names the unit in the column names
-  (``x_mm,y_mm``, ``x_um``, ``x_in``, ``x_cm``, ``x_m``; no header: mm); the last row must repeat
-  the first (the contour is closed);
-* a **DXF** drawing (ezdxf): the largest closed curve of the model space (LWPOLYLINE,
-  POLYLINE, CIRCLE, ELLIPSE, SPLINE; arcs and bulges flattened to 0.1 µm), scaled by the
-  drawing's ``$INSUNITS`` (unitless read as mm).
+* a **CSV** file of ``x, y`` rows or a **DXF** drawing's largest closed curve, read by
+  :mod:`lts360.scenes.contour_file` (the reader the ``profile`` object shares; units from the
+  CSV header or the DXF's ``$INSUNITS``, curves flattened to 0.1 µm).
 
 The nominal is placed on the measured section by moving its own least-squares centre onto the
 section's LS centre (translation only, no rotation).  The deviation of each point is its
@@ -20,25 +17,19 @@ polyline), positive outside the material boundary, negative inside.
 
 from __future__ import annotations
 
-import csv
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from lts360.inspect.circles import least_squares_circle
+from lts360.scenes.contour_file import CLOSURE_MM, UNIT_MM
 
 __all__ = ["Nominal", "ToleranceBand", "load_nominal", "nominal_from_spec", "read_contour_csv",
            "read_contour_dxf", "deviations", "UNIT_MM", "CLOSURE_MM"]
 
-#: Units a contour file may use, in mm.
-UNIT_MM = {"mm": 1.0, "um": 1e-3, "µm": 1e-3, "cm": 10.0, "m": 1000.0, "in": 25.4}
-#: Largest gap between a contour's first and last point for it to count as closed (mm).
-CLOSURE_MM = 1e-6
 #: Sampling of an analytic nominal contour (deg): chord sagitta below 0.1 µm at r = 30 mm.
 _SPEC_STEP_DEG = 0.1
-_DXF_UNITS_MM = {0: 1.0, 1: 25.4, 2: 304.8, 4: 1.0, 5: 10.0, 6: 1000.0, 13: 1e-3}
 
 
 @dataclass(frozen=True)
@@ -109,101 +100,20 @@ def nominal_from_spec(spec: str) -> Nominal:
     return Nominal(source=obj.spec, radius_fn=obj.radius_fn)
 
 
-def _closed_ring(xy: np.ndarray, where: str) -> np.ndarray:
-    import shapely
-
-    if len(xy) < 4:
-        raise ValueError(f"{where}: a closed contour needs at least 3 distinct points and the "
-                         f"first repeated at the end, got {len(xy)} rows")
-    gap = float(np.hypot(*(xy[-1] - xy[0])))
-    if gap > CLOSURE_MM:
-        raise ValueError(f"{where}: the contour is not closed (last point {gap:.6g} mm from the "
-                         f"first; repeat the first point at the end)")
-    ring = xy[:-1]
-    poly = shapely.Polygon(ring)
-    if not poly.is_valid or poly.area <= 0:
-        raise ValueError(f"{where}: the contour crosses itself or encloses no area")
-    if not shapely.LinearRing(ring).is_ccw:
-        ring = ring[::-1]
-    return np.ascontiguousarray(ring, dtype=float)
-
-
 def read_contour_csv(path) -> Nominal:
     """A closed contour from a CSV file of ``x, y`` rows (see the module docstring)."""
+    from lts360.scenes.contour_file import read_csv_ring
+
     p = Path(path)
-    rows = [r for r in csv.reader(p.read_text().splitlines())
-            if r and not r[0].lstrip().startswith("#")]
-    if not rows:
-        raise ValueError(f"--nominal {p}: no rows")
-    scale = 1.0
-    head = [c.strip() for c in rows[0]]
-    try:
-        float(head[0])
-    except ValueError:
-        units = set()
-        for c in head[:2]:
-            m = re.fullmatch(r"[A-Za-z]+[ _\[(]*([A-Za-zµ]+)[\])]*", c)
-            u = m.group(1) if m else None
-            if u not in UNIT_MM:
-                raise ValueError(f"--nominal {p}: column {c!r}: the unit does not parse; name "
-                                 f"columns like x_mm,y_mm (units: {', '.join(UNIT_MM)})")
-            units.add(u)
-        if len(units) != 1:
-            raise ValueError(f"--nominal {p}: x and y must share one unit, got {sorted(units)}")
-        scale = UNIT_MM[units.pop()]
-        rows = rows[1:]
-    xy = []
-    for i, r in enumerate(rows, start=2 if scale != 1.0 or not head[0][0].isdigit() else 1):
-        try:
-            if len(r) < 2:
-                raise ValueError
-            x, y = float(r[0]), float(r[1])
-            if not (np.isfinite(x) and np.isfinite(y)):
-                raise ValueError
-        except ValueError:
-            raise ValueError(f"--nominal {p}: row {r!r} is not two finite numbers") from None
-        xy.append((x, y))
-    return Nominal(source=str(p), fixed_xy_mm=_closed_ring(np.asarray(xy) * scale,
-                                                            f"--nominal {p}"))
+    return Nominal(source=str(p), fixed_xy_mm=read_csv_ring(p, f"--nominal {p}"))
 
 
 def read_contour_dxf(path) -> Nominal:
     """The largest closed curve of a DXF drawing's model space (see the module docstring)."""
-    import ezdxf
-    from ezdxf import path as dxfpath
+    from lts360.scenes.contour_file import read_dxf_ring
 
     p = Path(path)
-    try:
-        doc = ezdxf.readfile(str(p))
-    except (OSError, ezdxf.DXFError) as exc:
-        raise ValueError(f"--nominal {p}: not a readable DXF ({exc})") from None
-    code = int(doc.header.get("$INSUNITS", 0))
-    if code not in _DXF_UNITS_MM:
-        raise ValueError(f"--nominal {p}: drawing units $INSUNITS={code} do not parse as a "
-                         f"length (use mm, cm, m, in, ft, µm or unitless)")
-    scale = _DXF_UNITS_MM[code]
-    best, open_ones = None, 0
-    for e in doc.modelspace():
-        if e.dxftype() not in ("LWPOLYLINE", "POLYLINE", "CIRCLE", "ELLIPSE", "SPLINE"):
-            continue
-        if e.dxftype() in ("CIRCLE", "ELLIPSE"):  # vertices on the exact curve
-            verts = list(e.flattening(1e-4 / scale))
-            if (verts[-1] - verts[0]).magnitude > 0:
-                verts.append(verts[0])
-        else:
-            verts = dxfpath.make_path(e).flattening(1e-4 / scale)
-        pts = np.array([(v.x, v.y) for v in verts])
-        if len(pts) < 4 or np.hypot(*(pts[-1] - pts[0])) * scale > CLOSURE_MM:
-            open_ones += 1
-            continue
-        area = abs(np.dot(pts[:-1, 0], pts[1:, 1]) - np.dot(pts[1:, 0], pts[:-1, 1])) / 2
-        if best is None or area > best[0]:
-            best = (area, pts)
-    if best is None:
-        raise ValueError(f"--nominal {p}: no closed contour in the model space"
-                         + (f" ({open_ones} open curve(s): the contour is not closed)"
-                            if open_ones else ""))
-    return Nominal(source=str(p), fixed_xy_mm=_closed_ring(best[1] * scale, f"--nominal {p}"))
+    return Nominal(source=str(p), fixed_xy_mm=read_dxf_ring(p, f"--nominal {p}"))
 
 
 def load_nominal(text: str) -> Nominal:

@@ -2,7 +2,8 @@
 
 A frame directory holds ``image.png`` (what the camera outputs), ``radiance.exr`` (the
 noise-free expected radiance at the lens: channels ``Y`` = all light, ``laser`` = the
-laser's share), ``truth.ply`` (the object mesh in world millimetres, as rendered) and
+laser's share), ``truth.ply`` (the object mesh in world millimetres, as rendered), for a
+part read from a file its byte copy ``part.<suffix>`` (so the folder is self-contained) and
 ``frame.json`` (the true rig, the object spec and placement, the stage position, and every
 render and sensor setting).  Files are written to a temporary directory that is renamed into
 place, so an interrupted render leaves nothing half-written.
@@ -17,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from lts360.scenes.objects.base import SceneObject
+from lts360.scenes.objects.part import copy_part, part_truth
 from lts360.scenes.rig import Rig
 from lts360.simulator.io import rig_truth, write_exr, write_json, write_png
 from lts360.simulator.render import RenderResult, render_radiance, render_radiance_pixels
@@ -102,7 +104,7 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
     truth.update({
         "object": {"spec": obj.spec, "name": obj.name, "material": obj.material.name,
                    "T_world_object": T_stage @ obj.T_world_object,
-                   "measured_zone_z_mm": list(obj.measured_zone_z_mm)},
+                   "measured_zone_z_mm": list(obj.measured_zone_z_mm), **part_truth(obj)},
         "stage": {"z_mm": float(z_mm), "axis": [0.0, 0.0, 1.0]},
         "render": {"variant": res.variant, "spp": res.spp, "seed": res.seed, "scale": scale,
                    "max_bounces": max_bounces, "thin_lens": thin_lens, "laser_on": laser_on,
@@ -204,6 +206,7 @@ def write_frame(out_dir, frame: Frame) -> Path:
     write_exr(tmp / "radiance.exr", {"Y": frame.render.radiance_W_m2_sr,
                                      "laser": frame.render.laser_W_m2_sr})
     frame.mesh_world.export(tmp / "truth.ply")
+    copy_part(frame.truth["object"], tmp)
     write_json(tmp / "frame.json", frame.truth)
     shutil.rmtree(out, ignore_errors=True)
     tmp.replace(out)

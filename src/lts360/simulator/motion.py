@@ -30,6 +30,7 @@ from lts360.geometry.mirror import mirror_matrix
 from lts360.geometry import project_points
 from lts360.scenes.motion import Acquisition
 from lts360.scenes.objects.base import SceneObject
+from lts360.scenes.objects.part import part_truth
 from lts360.scenes.rig import Rig
 from lts360.simulator.frame import Frame, sensor_image, simulate_frame, stage_transform
 from lts360.simulator.io import rig_truth
@@ -216,7 +217,7 @@ def simulate_moving_frame(rig: Rig, obj: SceneObject, acq: Acquisition, *,
     truth.update({
         "object": {"spec": obj.spec, "name": obj.name, "material": obj.material.name,
                    "T_world_object": T_stage @ obj.T_world_object,
-                   "measured_zone_z_mm": list(obj.measured_zone_z_mm)},
+                   "measured_zone_z_mm": list(obj.measured_zone_z_mm), **part_truth(obj)},
         "stage": {"z_mm": float(z_mm), "axis": [0.0, 0.0, 1.0]},
         "render": {"variant": res.variant, "spp": res.spp, "seed": seed, "scale": scale,
                    "max_bounces": max_bounces, "thin_lens": thin_lens, "laser_on": True,

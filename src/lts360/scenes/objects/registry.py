@@ -22,6 +22,8 @@ class ObjectType:
     ``params_cls`` is a frozen dataclass of the generator's parameters with the paper's values
     as defaults; it validates itself in ``__post_init__`` and has a ``build(placement)`` method
     returning a :class:`SceneObject`.  ``aliases`` maps short keys to field names.
+    ``from_file``: the object is a user's part read from a file (``mesh``, ``profile``); it has
+    no default shape, so it cannot be built from its name alone.
     """
 
     name: str
@@ -29,6 +31,7 @@ class ObjectType:
     params_cls: type
     aliases: dict[str, str]
     defaults: dict[str, Any] = dataclasses.field(default_factory=dict)
+    from_file: bool = False
 
     def parameters(self) -> list[tuple[str, Any, str]]:
         """(field name, default, alias) for every parameter, defaults overridden by the entry."""
