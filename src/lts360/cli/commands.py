@@ -213,6 +213,18 @@ def _render_moving(args, rig, obj, acq, out: Path, variant: str) -> int:
     return 0
 
 
+def _scan_calibration_hint(path) -> None:
+    """A calibration path that does not exist inside a scan folder (``SCAN/frame.json``): name
+    the file to use, since each section of a rendered scan holds its own ``frame.json``."""
+    p = Path(path)
+    if p.exists() or not (p.parent / "scan.json").is_file():
+        return
+    first = sorted(p.parent.glob("section_*/frame.json"))
+    if first:
+        raise UsageError(f"--calibration: {p} does not exist; a scan folder holds one frame.json "
+                         f"per section (the same rig): use {first[0]}")
+
+
 def cmd_measure(args) -> int:
     from lts360.recon.calibration.model import load_calibration
     from lts360.recon.triangulation.acceptance import refusal, section_coverage
@@ -242,6 +254,7 @@ def cmd_measure(args) -> int:
         raise UsageError(f"--theta-step-deg: must be in (0, 10], got {args.theta_step_deg}")
     if not 0 < args.r_step_mm <= 0.1:
         raise UsageError(f"--r-step-mm: must be in (0, 0.1], got {args.r_step_mm}")
+    _scan_calibration_hint(args.calibration)
     cal = load_calibration(args.calibration)
     if args.compensate and not any(np.any(v) for v in cal.view_offsets_mm.values()):
         raise UsageError(f"--compensate: {args.calibration} has no view offsets (paper §4.4); "

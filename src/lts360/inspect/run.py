@@ -10,7 +10,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lts360.inspect import scan as scan_mod
-from lts360.inspect.circles import REFERENCES
+from lts360.inspect.circles import REFERENCES, least_squares_circle
+from lts360.inspect.extremes import DEFAULT_EXTREME_DRAWS, default_upr, extreme_noise
 from lts360.inspect.nominal import Nominal, ToleranceBand, deviations, place_nominal
 from lts360.inspect.profile import DEFAULT_BIN_DEG, DEFAULT_GAP_DEG, valid_mask
 from lts360.inspect.section import MIN_POINTS, SectionResult, analyse_section
@@ -39,13 +40,30 @@ class Inspection:
     band: ToleranceBand | None = None
 
 
-def _q(value, *u_parts) -> dict:
+def _q(value, *u_parts, bias=None) -> dict:
+    """``{value, u, U_k2}``; with the noise ``bias`` of an extreme (not corrected) also
+    ``bias_mm`` and ``U_k2 = 2u + |bias|``."""
     v = None if value is None or not np.isfinite(value) else float(value)
-    return {"value": v, **combine(*u_parts)}
+    out = {"value": v, **combine(*u_parts)}
+    if bias is not None and np.isfinite(bias):
+        out["bias_mm"] = float(bias)
+        out["U_k2"] = out["U_k2"] + abs(float(bias))
+    return out
 
 
-def _section_dict(s: SectionResult, us: dict, uc: dict | None, u_radial_mm: float) -> dict:
+def _section_dict(s: SectionResult, us: dict, uc: dict | None, u_radial_mm: float,
+                  ex=None) -> dict:
+    """``ex`` (:class:`lts360.inspect.extremes.ExtremeNoise`): the extremes' u from the
+    section's noise (in place of the scatter table's) and their bias, carried in U."""
     g = (uc or {}).get
+    if ex is not None:
+        us = {**us, "d_min_mm": ex.u_mm["d_min_mm"], "d_max_mm": ex.u_mm["d_max_mm"],
+              "ovality_mm": ex.u_mm["ovality_mm"],
+              "calliper_min_mm": ex.u_mm["d_min_mm"], "calliper_max_mm": ex.u_mm["d_max_mm"]}
+        b = ex.bias_mm
+    else:
+        us = {**us, "calliper_min_mm": us["calliper_mm"], "calliper_max_mm": us["calliper_mm"]}
+        b = {}
     ub = 2.0 * u_radial_mm if u_radial_mm else None  # a common radial offset: 2u on sizes
     d = s.diameters
     ls = s.ls
@@ -59,21 +77,28 @@ def _section_dict(s: SectionResult, us: dict, uc: dict | None, u_radial_mm: floa
            "centre_y_mm": _q(ls.centre_mm[1], us["centre_y_mm"], g("centre_y_mm")),
            "d_ls_mm": _q(ls.diameter_mm, us["d_ls_mm"], g("d_ls_mm"), ub),
            "d_mean_mm": _q(d.d_mean_mm, us["d_mean_mm"], g("d_mean_mm"), ub),
-           "d_min_mm": _q(d.d_min_mm, us["d_min_mm"], g("d_min_mm"), ub),
-           "d_max_mm": _q(d.d_max_mm, us["d_max_mm"], g("d_max_mm"), ub),
+           "d_min_mm": _q(d.d_min_mm, us["d_min_mm"], g("d_min_mm"), ub,
+                          bias=b.get("d_min_mm")),
+           "d_max_mm": _q(d.d_max_mm, us["d_max_mm"], g("d_max_mm"), ub,
+                          bias=b.get("d_max_mm")),
            "phi_d_min_deg": d.phi_d_min_deg, "phi_d_max_deg": d.phi_d_max_deg,
            "n_directions_measured": d.n_directions_measured,
-           "ovality_mm": _q(d.ovality_mm, us["ovality_mm"], g("ovality_mm")),
-           "calliper_min_mm": _q(d.calliper_min_mm, us["calliper_mm"], g("d_min_mm"), ub),
-           "calliper_max_mm": _q(d.calliper_max_mm, us["calliper_mm"], g("d_max_mm"), ub)}
-    uo = out["ovality_mm"]["u"]
+           "ovality_mm": _q(d.ovality_mm, us["ovality_mm"], g("ovality_mm"),
+                            bias=b.get("ovality_mm")),
+           "calliper_min_mm": _q(d.calliper_min_mm, us["calliper_min_mm"], g("d_min_mm"), ub,
+                                 bias=b.get("d_min_mm")),
+           "calliper_max_mm": _q(d.calliper_max_mm, us["calliper_max_mm"], g("d_max_mm"), ub,
+                                 bias=b.get("d_max_mm"))}
+    uo = out["ovality_mm"]["U_k2"] / 2
     if np.isfinite(d.ovality_mm):
         out["ovality_over_sum_pct"] = _q(d.ovality_over_sum_pct,
                                          100 * uo / (d.d_max_mm + d.d_min_mm))
         out["ovality_over_mean_pct"] = _q(d.ovality_over_mean_pct, 100 * uo / d.d_mean_mm)
     else:
         out["ovality_over_sum_pct"] = out["ovality_over_mean_pct"] = _q(None)
-    out["ront_mm"] = {name: _q(c.ront_mm, us["ront_mm"], g("ront_lsci_mm"))
+    out["ront_mm"] = {name: _q(c.ront_mm, ex.u_mm[f"ront_{name}_mm"] if ex is not None
+                               else us["ront_mm"], g("ront_lsci_mm"),
+                               bias=b.get(f"ront_{name}_mm"))
                       for name, c in s.circles.items()}
     out["reference_circles"] = {
         name: {"centre_x_mm": float(c.centre_mm[0]), "centre_y_mm": float(c.centre_mm[1]),
@@ -90,7 +115,8 @@ def _section_dict(s: SectionResult, us: dict, uc: dict | None, u_radial_mm: floa
     return out
 
 
-def _truth_rows(truth, sections: list[SectionResult]) -> tuple[dict, list]:
+def _truth_rows(truth, sections: list[SectionResult],
+                filter_upr: float | None = None) -> tuple[dict, list]:
     from lts360.inspect.truth import load_truth, true_section_xy
 
     obj, _ = truth if isinstance(truth, tuple) else load_truth(truth)
@@ -100,7 +126,7 @@ def _truth_rows(truth, sections: list[SectionResult]) -> tuple[dict, list]:
         if xy is None or len(xy) < MIN_POINTS:
             rows.append(None)
             continue
-        t = analyse_section(xy, index=s.index, z_mm=s.z_mm)
+        t = analyse_section(xy, index=s.index, z_mm=s.z_mm, filter_upr=filter_upr)
         rows.append({"centre_x_mm": float(t.ls.centre_mm[0]),
                      "centre_y_mm": float(t.ls.centre_mm[1]), "d_ls_mm": t.ls.diameter_mm,
                      "d_mean_mm": t.diameters.d_mean_mm, "d_min_mm": t.diameters.d_min_mm,
@@ -116,7 +142,9 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
                   lump_threshold_mm: float = scan_mod.DEFAULT_LUMP_MM,
                   n_draws: int = DEFAULT_DRAWS, seed: int = 0, u_radial_mm: float = 0.0,
                   bin_deg: float = DEFAULT_BIN_DEG, gap_deg: float = DEFAULT_GAP_DEG,
-                  filter_upr: float | None = None, source: str = "") -> Inspection:
+                  filter_upr: float | None = None, use_filter: bool = True,
+                  extreme_draws: int = DEFAULT_EXTREME_DRAWS,
+                  source: str = "") -> Inspection:
     """Inspect every section of ``cloud``.
 
     Parameters
@@ -134,6 +162,14 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         Type-B standard uncertainty of a radial offset common to a section (the rig's error
         budget or a reference measurement's bias): 2u on every diameter, u on a deviation,
         nothing on centre, ovality, roundness or harmonics, where it cancels.
+    filter_upr : float, [1, 1000], optional
+        Cut-off of the ISO 12181-2 Gaussian filter applied before the reference circles and
+        diameters; default: the standard's default for the scan's median LS diameter
+        (:func:`lts360.inspect.extremes.default_upr`).
+    use_filter : bool
+        False: no filter (``--filter none``).
+    extreme_draws : int, >= 2
+        Noise draws of each section's extremes' Monte Carlo (:mod:`lts360.inspect.extremes`).
 
     Raises
     ------
@@ -146,10 +182,27 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         raise ValueError(f"--filter-upr: must be in [1, 1000], got {filter_upr}")
     if band is not None and nominal is None:
         raise ValueError("--tolerance-mm/--upper-mm/--lower-mm need --nominal")
+    if not use_filter and filter_upr is not None:
+        raise ValueError("--filter-upr: give it or --filter none, not both")
     ok = valid_mask(cloud.points_mm, cloud.quality)
     if not ok.any():
         raise NoValidPoints(f"the cloud {source or ''} has no valid point ({len(cloud)} samples, "
                             "none finite with quality FOUND or SATURATED)".replace("  ", " "))
+    # the default filter from the scan's median LS diameter (of the points, unfiltered)
+    form_upr = default_upr(float(np.median([
+        least_squares_circle(cloud.points_mm[(cloud.section == k) & ok, :2]).diameter_mm
+        for k in np.unique(cloud.section)
+        if ((cloud.section == k) & ok).sum() >= MIN_POINTS] or [np.nan]))) \
+        if any(((cloud.section == k) & ok).sum() >= MIN_POINTS
+               for k in np.unique(cloud.section)) else None
+    if use_filter and filter_upr is None:
+        filter_upr = form_upr
+        filter_note = (f"ISO 12181-2 Gaussian, {filter_upr:g} UPR (the standard's default for "
+                       "the scan's diameter)")
+    elif use_filter:
+        filter_note = f"ISO 12181-2 Gaussian, {filter_upr:g} UPR (--filter-upr)"
+    else:
+        filter_upr, filter_note = None, "none (--filter none)"
     sections, skipped, xy_list, view_list, times = [], [], [], [], []
     for k in np.unique(cloud.section):
         m = cloud.section == k
@@ -183,7 +236,15 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
                                                bin_deg=bin_deg)
         us = scatter_u(s.scatter_mm, s.n_valid, s.points_per_bin, u_mean_radius_mm=u_mean,
                        u_bin_mm=s_bin)
-        row = _section_dict(s, us, None if u_cal is None else u_cal[i], u_radial_mm)
+        bin_u = max(s.scatter_mm / np.sqrt(max(s.points_per_bin, 1.0)),
+                    s_bin if np.isfinite(s_bin) else 0.0)
+        rho = (tau - 1) / (tau + 1) if np.isfinite(tau) else 0.0
+        ex = extreme_noise(raw, upr=filter_upr, s_bin_mm=bin_u, rho=rho,
+                           form_upr=form_upr or 150.0, n_draws=extreme_draws,
+                           rng=np.random.SeedSequence([seed, int(s.index)]), gap_deg=gap_deg)
+        row = _section_dict(s, us, None if u_cal is None else u_cal[i], u_radial_mm, ex)
+        row["extreme_noise"] = {"s_bin_mm": ex.s_bin_mm, "rho": ex.rho, "n_draws": ex.n_draws,
+                                "bias_mm": ex.bias_mm, "u_mm": ex.u_mm}
         row["correlation_bins"] = tau if np.isfinite(tau) else None
         if times[i] is not None:
             row["time_s"], row["time_span_s"] = times[i]
@@ -220,13 +281,18 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
                             "pass": bool(all_pass)})
     truth_out = None
     if truth is not None:
-        truth_out, trows = _truth_rows(truth, sections)
+        truth_out, trows = _truth_rows(truth, sections, filter_upr)
         for row, t in zip(rows, trows):
             row["truth"] = t
     inspection.data = {
         "source": source, "n_sections": len(sections), "sections_skipped": skipped,
         "units": "lengths in mm, angles in deg; {value, u, U_k2}: U_k2 = 2u",
         "settings": {"bin_deg": bin_deg, "gap_deg": gap_deg, "filter_upr": filter_upr,
+                     "filter": filter_note,
+                     "extremes": f"D min, D max, ovality, RONt: U(k = 2) = 2u + |bias|, the "
+                                 f"noise bias of the extremes from a Monte Carlo of "
+                                 f"{extreme_draws} draws of each section's own noise, not "
+                                 f"corrected",
                      "lump_threshold_mm": lump_threshold_mm,
                      "reference_circles": list(REFERENCES),
                      "calibration_uncertainty": cal_note,
