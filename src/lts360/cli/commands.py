@@ -3,6 +3,7 @@ inspect."""
 
 from __future__ import annotations
 
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -211,6 +212,12 @@ def _render_moving(args, rig, obj, acq, out: Path, variant: str) -> int:
           f"{n} frame(s), {m['renders']} sub-renders of the first ({variant}, {args.spp} spp) "
           f"-> {out}/")
     return 0
+
+
+def _version() -> str:
+    from lts360 import __version__
+
+    return __version__
 
 
 def _scan_calibration_hint(path) -> None:
@@ -514,6 +521,15 @@ def cmd_inspect(args) -> int:
         raise UsageError(f"--u-radial-mm: must be >= 0, got {args.u_radial_mm}")
     if not 2 <= args.draws <= 10000:
         raise UsageError(f"--draws: must be in [2, 10000], got {args.draws}")
+    if args.filter_upr is not None and not (np.isfinite(args.filter_upr)
+                                            and 1 <= args.filter_upr <= 1000):
+        raise UsageError(f"--filter-upr: must be in [1, 1000], got {args.filter_upr:g}")
+    if args.filter == "none" and args.filter_upr is not None:
+        raise UsageError("--filter-upr: give it or --filter none, not both")
+    from lts360.inspect.tolerances import check_ovality_max, parse_diameter_tolerance
+
+    diameter_tol = None if args.diameter_mm is None else parse_diameter_tolerance(args.diameter_mm)
+    ovality_max = None if args.ovality_max_mm is None else check_ovality_max(args.ovality_max_mm)
     band = None
     if args.tolerance_mm is not None:
         band = ToleranceBand.symmetric(args.tolerance_mm)
@@ -541,7 +557,13 @@ def cmd_inspect(args) -> int:
     ins = inspect_cloud(cloud, nominal=nominal, band=band, calibration=cal, truth=truth,
                         lump_threshold_mm=args.lump_mm, n_draws=args.draws, seed=args.seed,
                         u_radial_mm=u_radial, filter_upr=args.filter_upr,
-                        source=str(args.cloud))
+                        use_filter=args.filter != "none", diameter_tol=diameter_tol,
+                        ovality_max_mm=ovality_max, source=str(args.cloud))
+    ins.data["tool"] = {"name": "lts360", "version": _version()}
+    ins.data["date_utc"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    ins.data["command"] = "lts360 " + " ".join(shlex.quote(a) for a in args.argv) \
+        if getattr(args, "argv", None) else None
+    ins.data["calibration"] = args.calibration
     if u_twin is not None:
         ins.data["settings"]["twin_u_inputs_mm"] = u_twin
         print(f"  the cloud is twin-corrected: its inputs' u ({1e3 * u_twin:.2f} µm radial) is "
@@ -558,8 +580,12 @@ def cmd_inspect(args) -> int:
               f"{1e3 * e['deviation_mm']:+.1f} µm)")
     if d["nominal"] and "pass" in d["nominal"]:
         print(f"  against {d['nominal']['source']}: {'PASS' if d['nominal']['pass'] else 'FAIL'}")
+    if d["verdict"] is not None:
+        v = d["verdict"]
+        print("PASS" if v["pass"] else "FAIL: " + "; ".join(v["failed"][:5])
+              + (f" and {len(v['failed']) - 5} more" if len(v["failed"]) > 5 else ""))
     if d["sections_skipped"]:
         print(f"lts360: inspect: {len(d['sections_skipped'])} section(s) with too few valid "
               f"points left out", file=sys.stderr)
     print(f"wrote {out}/report.html, inspection.json, sections.csv, figures")
-    return 0
+    return 1 if d["verdict"] is not None and not d["verdict"]["pass"] else 0

@@ -143,8 +143,8 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
                   n_draws: int = DEFAULT_DRAWS, seed: int = 0, u_radial_mm: float = 0.0,
                   bin_deg: float = DEFAULT_BIN_DEG, gap_deg: float = DEFAULT_GAP_DEG,
                   filter_upr: float | None = None, use_filter: bool = True,
-                  extreme_draws: int = DEFAULT_EXTREME_DRAWS,
-                  source: str = "") -> Inspection:
+                  extreme_draws: int = DEFAULT_EXTREME_DRAWS, diameter_tol=None,
+                  ovality_max_mm: float | None = None, source: str = "") -> Inspection:
     """Inspect every section of ``cloud``.
 
     Parameters
@@ -170,6 +170,10 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         False: no filter (``--filter none``).
     extreme_draws : int, >= 2
         Noise draws of each section's extremes' Monte Carlo (:mod:`lts360.inspect.extremes`).
+    diameter_tol : DiameterTolerance, optional
+    ovality_max_mm : float, > 0, optional
+        Size and ovality limits (:mod:`lts360.inspect.tolerances`); with them, or with
+        ``band``, ``data["verdict"]`` holds the scan's PASS/FAIL.
 
     Raises
     ------
@@ -279,6 +283,29 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         if band is not None:
             nom_out.update({"upper_mm": band.upper_mm, "lower_mm": band.lower_mm,
                             "pass": bool(all_pass)})
+    tol_out = None
+    if diameter_tol is not None or ovality_max_mm is not None:
+        from lts360.inspect.tolerances import section_checks
+
+        for row in rows:
+            row["checks"] = section_checks(row, diameter=diameter_tol,
+                                           ovality_max_mm=ovality_max_mm)
+        tol_out = {"diameter_mm": None if diameter_tol is None else
+                   {"nominal_mm": diameter_tol.nominal_mm, "tol_mm": diameter_tol.tol_mm,
+                    "lower_mm": diameter_tol.lower_mm, "upper_mm": diameter_tol.upper_mm},
+                   "ovality_max_mm": ovality_max_mm,
+                   "rule": "pass: the measured values within the limits; conformance by "
+                           "ISO 14253-1 with U(k = 2)"}
+    verdict = None
+    if tol_out is not None or (nom_out is not None and "pass" in nom_out):
+        failed = []
+        if nom_out is not None and "pass" in nom_out and not nom_out["pass"]:
+            failed.append("profile zone")
+        for row in rows:
+            for name, c in row.get("checks", {}).items():
+                if not c["pass"]:
+                    failed.append(f"{name} at z = {row['z_mm']:.2f} mm")
+        verdict = {"pass": not failed, "failed": failed}
     truth_out = None
     if truth is not None:
         truth_out, trows = _truth_rows(truth, sections, filter_upr)
@@ -298,7 +325,7 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
                      "calibration_uncertainty": cal_note,
                      "u_radial_mm": u_radial_mm},
         "sections": rows, "scan": _scan(sections, rows, lump_threshold_mm),
-        "nominal": nom_out, "truth": truth_out}
+        "nominal": nom_out, "tolerances": tol_out, "verdict": verdict, "truth": truth_out}
     return inspection
 
 
@@ -324,9 +351,15 @@ def _scan(sections: list[SectionResult], rows: list[dict], lump_mm: float) -> di
            "trends": {k: scan_mod.trend(z, val(k)) for k in
                       ("d_ls_mm", "d_min_mm", "d_max_mm", "ovality_mm", "centre_x_mm",
                        "centre_y_mm")},
-           "events": [e.__dict__ for e in scan_mod.lumps_and_necks(
-               z, val("d_min_mm"), val("d_max_mm"), threshold_mm=lump_mm,
-               indices=[s.index for s in sections])]}
+           }
+    un = [r.get("extreme_noise", {}).get("u_mm", {}) for r in rows]
+    ev = scan_mod.lumps_and_necks(
+        z, val("d_min_mm"), val("d_max_mm"), threshold_mm=lump_mm,
+        indices=[s.index for s in sections],
+        u_d_min_mm=[x.get("d_min_mm", np.nan) for x in un] if all(un) else None,
+        u_d_max_mm=[x.get("d_max_mm", np.nan) for x in un] if all(un) else None)
+    out["events"] = [e.__dict__ for e in ev if e.significant]
+    out["events_not_significant"] = [e.__dict__ for e in ev if not e.significant]
     if all("time_s" in r for r in rows):  # a moving object: when each event passed the laser
         t = np.array([r["time_s"] for r in rows])
         order = np.argsort(z)
@@ -335,10 +368,19 @@ def _scan(sections: list[SectionResult], rows: list[dict], lump_mm: float) -> di
             e["time_s"] = float(np.interp(e["z_extreme_mm"], z[order], t[order]))
     if len(sections) >= 2 and np.ptp(z) > 0:
         ax = scan_mod.fit_axis(z, [s.ls.centre_mm for s in sections])
+        u_c = float(np.median([np.hypot(r["centre_x_mm"]["u"], r["centre_y_mm"]["u"])
+                               / np.sqrt(2) for r in rows]))
+        tu = scan_mod.tilt_uncertainty(z, ax, u_c)
         out["axis"] = {"x0_mm": ax.x0_mm, "y0_mm": ax.y0_mm, "slope_x": ax.slope_x,
-                       "slope_y": ax.slope_y, "tilt_deg": ax.tilt_deg,
-                       "tilt_azimuth_deg": ax.tilt_azimuth_deg,
+                       "slope_y": ax.slope_y,
+                       "tilt_deg": None if tu["too_short"] else ax.tilt_deg,
+                       "U_tilt_deg": tu["U_tilt_deg"],
+                       "tilt_azimuth_deg": None if tu["too_short"] else ax.tilt_azimuth_deg,
                        "straightness_mm": ax.straightness_mm}
+        if tu["too_short"]:
+            out["axis"]["note"] = (f"too short to tell: the tilt's U(k = 2) is "
+                                   f"{tu['U_tilt_deg']:.3f}° > {scan_mod.TILT_TELL_DEG}° "
+                                   f"(the centres give {ax.tilt_deg:.3f}°)")
         out["cylindricity"] = scan_mod.cylindricity(z, [s.profile.xy_mm for s in sections],
                                                     start=ax)
         out["diameter_spectrum"] = scan_mod.diameter_spectrum(z, val("d_ls_mm"))
