@@ -214,12 +214,6 @@ def _render_moving(args, rig, obj, acq, out: Path, variant: str) -> int:
     return 0
 
 
-def _version() -> str:
-    from lts360 import __version__
-
-    return __version__
-
-
 def _scan_calibration_hint(path) -> None:
     """A calibration path that does not exist inside a scan folder (``SCAN/frame.json``): name
     the file to use, since each section of a rendered scan holds its own ``frame.json``."""
@@ -559,8 +553,6 @@ def cmd_inspect(args) -> int:
                         u_radial_mm=u_radial, filter_upr=args.filter_upr,
                         use_filter=args.filter != "none", diameter_tol=diameter_tol,
                         ovality_max_mm=ovality_max, source=str(args.cloud))
-    ins.data["tool"] = {"name": "lts360", "version": _version()}
-    ins.data["date_utc"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     ins.data["command"] = "lts360 " + " ".join(shlex.quote(a) for a in args.argv) \
         if getattr(args, "argv", None) else None
     ins.data["calibration"] = args.calibration

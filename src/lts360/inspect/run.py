@@ -311,7 +311,13 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         truth_out, trows = _truth_rows(truth, sections, filter_upr)
         for row, t in zip(rows, trows):
             row["truth"] = t
+    import time
+
+    from lts360 import __version__
+
     inspection.data = {
+        "tool": {"name": "lts360", "version": __version__},
+        "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "source": source, "n_sections": len(sections), "sections_skipped": skipped,
         "units": "lengths in mm, angles in deg; {value, u, U_k2}: U_k2 = 2u",
         "settings": {"bin_deg": bin_deg, "gap_deg": gap_deg, "filter_upr": filter_upr,
