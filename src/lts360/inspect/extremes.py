@@ -10,9 +10,20 @@ the diameter (:data:`ISO_DEFAULT_UPR`: 15 UPR up to Ø 8 mm, 50 up to 25, 150 up
 profile's extremes; noise on the bins pushes a maximum up and a minimum down, by more the more
 independent bins sit near the extreme — a bias, not only a spread.  :func:`extreme_noise`
 estimates both from the section's own noise by a Monte Carlo: the profile through the filter
-at a third of the cut-off is taken as the form, ``n_draws`` noise realisations with the section's bin noise (its standard deviation
-``s`` and lag-1 correlation ``ρ``, an AR(1) process as in :mod:`lts360.inspect.uncertainty`)
-are passed through the same filter and added, and every extreme quantity is recomputed.  The
+at a third of the cut-off is taken as the form, and its residuals about it (each bin's own
+noise) are redrawn in two ways, and each quantity takes the larger bias and the larger u of
+the two: (a) a stationary Gaussian AR(1) noise with the section's bin noise (its standard
+deviation ``s`` and lag-1 correlation ``ρ``, as in :mod:`lts360.inspect.uncertainty`); (b) a
+wild block bootstrap — each block of neighbouring bins keeps its
+residuals, multiplied by a random sign (blocks of about twice the bins' correlation length
+τ = (1 + ρ)/(1 − ρ), with a random start per draw).  That keeps the noise where it is: a view
+that is noisier than the others (a mirror view, a glint) and heavy tails (a stray point) weigh
+in the draws as they weigh in the measurement, which a stationary Gaussian model of the same
+variance does not (measured on rendered scans: with an AR(1) Gaussian model RONt against the
+LS circle fell outside U in 11 of 20 realistic PVC sections; on white synthetic noise, where
+the Gaussian model is exact, the bootstrap alone came out 30 % low).  The redrawn noise is
+passed through the same filter and added to the form, and every extreme quantity is
+recomputed.  The
 mean shift over the draws is the bias, their standard deviation the noise's u.  The reported
 value is not corrected (a gauge reports the filtered extreme); the bias enters U linearly:
 ``U = 2 u_c + |bias|`` (:func:`lts360.inspect.run`).
@@ -168,6 +179,20 @@ def _ar1_noise(rng: np.random.Generator, m: int, n: int, s: float, rho: float) -
     return s * np.fft.irfft(np.sqrt(spec) * np.fft.rfft(white, axis=1), n=n, axis=1)
 
 
+def _wild_block_noise(rng: np.random.Generator, m: int, resid: np.ndarray,
+                      rho: float) -> np.ndarray:
+    """``(m, n)`` redraws of the residuals ``resid : (n,)``: each block of
+    ``max(2, ⌈2τ⌉)`` neighbouring bins (τ = (1 + ρ)/(1 − ρ)) multiplied by a random sign,
+    the blocks' start shifted at random per draw."""
+    n = len(resid)
+    L = int(max(2, np.ceil(2 * (1 + rho) / (1 - rho))))
+    nb = -(-n // L) + 1
+    signs = rng.choice([-1.0, 1.0], size=(m, nb))
+    shift = rng.integers(0, L, size=m)
+    block = (np.arange(n)[None, :] + shift[:, None]) // L
+    return resid[None, :] * np.take_along_axis(signs, block, axis=1)
+
+
 def extreme_noise(raw: BinnedProfile, *, upr: float | None, s_bin_mm: float, rho: float,
                   form_upr: float, n_draws: int = DEFAULT_EXTREME_DRAWS, rng=None,
                   circle_draws: int = DEFAULT_CIRCLE_DRAWS,
@@ -188,8 +213,8 @@ def extreme_noise(raw: BinnedProfile, *, upr: float | None, s_bin_mm: float, rho
         The form is the profile through :data:`FORM_FRACTION` of ``upr``, or of this cut-off
         when no filter is applied.
     n_draws : int, >= 2
-    circle_draws : int, [2, n_draws]
-        Draws on which the MZCI, MCCI and MICI are fitted again.
+    circle_draws : int, [4, 2 n_draws]
+        Draws (half of each noise model) on which the MCCI and MICI are fitted again.
     rng : Generator | int | None
     """
     if n_draws < 2:
@@ -199,20 +224,27 @@ def extreme_noise(raw: BinnedProfile, *, upr: float | None, s_bin_mm: float, rho
     form = filter_grid(r, FORM_FRACTION * (form_upr if upr is None else upr))
     s = float(s_bin_mm) if np.isfinite(s_bin_mm) else 0.0
     rho = float(np.clip(rho if np.isfinite(rho) else 0.0, 0.0, 0.99))
-    noise = _ar1_noise(rng, n_draws, len(r), s, rho)
-    if upr is not None:
-        noise = np.fft.irfft(gaussian_transfer(len(r), upr) * np.fft.rfft(noise, axis=1),
-                             n=len(r), axis=1)
     q0 = extreme_quantities(form[None, :])
-    q = extreme_quantities(form[None, :] + noise)
-    m = int(np.clip(circle_draws, 2, n_draws))
     q0.update(_circle_ront(raw.centre_mm, form[None, :]))
-    q.update(_circle_ront(raw.centre_mm, form[None, :] + noise[:m]))
-    q0["ront_MZCI_mm"], q["ront_MZCI_mm"] = q0["ront_LSCI_mm"], q["ront_LSCI_mm"]
-    bias, u = {}, {}
-    for k in EXTREME_KEYS:
-        v = q[k][np.isfinite(q[k])]
-        ok = v.size >= 2 and np.isfinite(q0[k][0])
-        bias[k] = float(v.mean() - q0[k][0]) if ok else float("nan")
-        u[k] = float(v.std(ddof=1)) if ok else float("nan")
+    q0["ront_MZCI_mm"] = q0["ront_LSCI_mm"]
+    m = int(np.clip(circle_draws // 2, 2, n_draws))
+    bias = {k: float("nan") for k in EXTREME_KEYS}
+    u = dict(bias)
+    for noise in (_ar1_noise(rng, n_draws, len(r), s, rho),
+                  _wild_block_noise(rng, n_draws, np.where(np.isfinite(r), r - form, 0.0), rho)):
+        if upr is not None:
+            noise = np.fft.irfft(gaussian_transfer(len(r), upr) * np.fft.rfft(noise, axis=1),
+                                 n=len(r), axis=1)
+        q = extreme_quantities(form[None, :] + noise)
+        q.update(_circle_ront(raw.centre_mm, form[None, :] + noise[:m]))
+        q["ront_MZCI_mm"] = q["ront_LSCI_mm"]
+        for k in EXTREME_KEYS:
+            v = q[k][np.isfinite(q[k])]
+            if v.size < 2 or not np.isfinite(q0[k][0]):
+                continue
+            b, sd = float(v.mean() - q0[k][0]), float(v.std(ddof=1))
+            if not abs(b) <= abs(bias[k]):  # NaN (the first) or larger
+                bias[k] = b
+            if not sd <= u[k]:
+                u[k] = sd
     return ExtremeNoise(bias, u, int(n_draws), s, rho, upr)

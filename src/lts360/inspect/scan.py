@@ -11,8 +11,11 @@ stage position ``z_mm``.
   the extreme deviation.  A local bump or dent changes Dmax or Dmin long before it moves the
   LS diameter.  Given each section's noise u of Dmax and Dmin, an event must also be
   significant: its deviation beyond its own U(k = 2) (``u² = u_section² + u_median²``,
-  ``u_median = 1.2533 · median(u) / √n``; the noise bias and the calibration are common to
-  every section and cancel), and it reports its confidence, the probability that the true
+  ``u_median = 1.2533 · u_scan / √n``; the noise bias and the calibration are common to
+  every section and cancel).  ``u_section`` is the larger of the section's u and the scan's
+  own spread of the deviations ``u_scan = 1.4826 · MAD`` (robust: a few sections with an
+  event leave it alone; on a smooth pipe it is the section-to-section noise the model may
+  miss).  Each event reports its confidence, the probability that the true
   deviation exceeds the threshold (normal, ``Φ((|dev| − threshold) / u)``).  Runs beyond the
   threshold but within their U are returned apart, as not significant.
 * **Axis**: the line ``x = x₀ + aₓ z``, ``y = y₀ + a_y z`` fitted to the LS centres; tilt is its
@@ -120,7 +123,8 @@ def lumps_and_necks(z_mm, d_min_mm, d_max_mm, *, threshold_mm: float = DEFAULT_L
             continue
         dev = sign * (v - np.nanmedian(v))
         if u is not None:
-            u = np.asarray(u, float)[order]
+            u_scan = 1.4826 * float(np.nanmedian(np.abs(dev)))
+            u = np.maximum(np.asarray(u, float)[order], u_scan)
             u_med = 1.2533 * float(np.nanmedian(u)) / np.sqrt(np.isfinite(v).sum())
         for run in _runs(np.nan_to_num(dev, nan=-np.inf) > threshold_mm):
             k = run[np.argmax(dev[run])]
