@@ -41,7 +41,11 @@ first harmonic removed), and the MZCI's RONt takes its bias and u (both are peak
 the same radii about centres a few µm apart; measured on synthetic sections, they agree);
 against the MCCI and MICI the circles are fitted again on the first ``circle_draws`` draws
 (the MCCI and MICI of an oval are ill-conditioned: their centre slides along the major axis
-with the noise, so their RONt moves far more than the LS one).
+with the noise, so their RONt moves far more than the LS one).  Those refits cost most of the
+time (~0.04 s a draw), so ``lts360 inspect`` runs them on at most
+:data:`CIRCLE_SECTIONS` sections spread over the scan and each other section takes the
+nearest one's (the shape that makes them ill-conditioned, an ovality, changes slowly along a
+scan).
 Gaps are left out of every extreme (their noise is filtered as if the profile were closed: a
 small error at a gap's edge).
 """
@@ -69,6 +73,8 @@ EXTREME_KEYS = ("d_min_mm", "d_max_mm", "ovality_mm", "ront_LSCI_mm", "ront_MZCI
 #: Draws on which the MCCI and MICI are fitted again (12: bias to ±30 % of u; each costs the
 #: two fits, ~0.04 s).
 DEFAULT_CIRCLE_DRAWS = 12
+#: Sections of a scan on which the MCCI and MICI are fitted again.
+CIRCLE_SECTIONS = 5
 #: The form of the Monte Carlo: the profile through the filter at this fraction of the cut-off.
 FORM_FRACTION = 1.0 / 3.0
 
@@ -195,7 +201,7 @@ def _wild_block_noise(rng: np.random.Generator, m: int, resid: np.ndarray,
 
 def extreme_noise(raw: BinnedProfile, *, upr: float | None, s_bin_mm: float, rho: float,
                   form_upr: float, n_draws: int = DEFAULT_EXTREME_DRAWS, rng=None,
-                  circle_draws: int = DEFAULT_CIRCLE_DRAWS,
+                  circle_draws: int = DEFAULT_CIRCLE_DRAWS, circles: bool = True,
                   gap_deg: float = DEFAULT_GAP_DEG) -> ExtremeNoise:
     """Bias and u of the extremes of one section from its own noise (module docstring).
 
@@ -215,6 +221,8 @@ def extreme_noise(raw: BinnedProfile, *, upr: float | None, s_bin_mm: float, rho
     n_draws : int, >= 2
     circle_draws : int, [4, 2 n_draws]
         Draws (half of each noise model) on which the MCCI and MICI are fitted again.
+    circles : bool
+        False: leave the MCCI's and MICI's RONt out (NaN; they cost most of the time).
     rng : Generator | int | None
     """
     if n_draws < 2:
@@ -225,7 +233,9 @@ def extreme_noise(raw: BinnedProfile, *, upr: float | None, s_bin_mm: float, rho
     s = float(s_bin_mm) if np.isfinite(s_bin_mm) else 0.0
     rho = float(np.clip(rho if np.isfinite(rho) else 0.0, 0.0, 0.99))
     q0 = extreme_quantities(form[None, :])
-    q0.update(_circle_ront(raw.centre_mm, form[None, :]))
+    nan = np.full(1, np.nan)
+    q0.update(_circle_ront(raw.centre_mm, form[None, :]) if circles else
+              {"ront_MCCI_mm": nan, "ront_MICI_mm": nan})
     q0["ront_MZCI_mm"] = q0["ront_LSCI_mm"]
     m = int(np.clip(circle_draws // 2, 2, n_draws))
     bias = {k: float("nan") for k in EXTREME_KEYS}
@@ -236,7 +246,8 @@ def extreme_noise(raw: BinnedProfile, *, upr: float | None, s_bin_mm: float, rho
             noise = np.fft.irfft(gaussian_transfer(len(r), upr) * np.fft.rfft(noise, axis=1),
                                  n=len(r), axis=1)
         q = extreme_quantities(form[None, :] + noise)
-        q.update(_circle_ront(raw.centre_mm, form[None, :] + noise[:m]))
+        q.update(_circle_ront(raw.centre_mm, form[None, :] + noise[:m]) if circles else
+                 {"ront_MCCI_mm": nan, "ront_MICI_mm": nan})
         q["ront_MZCI_mm"] = q["ront_LSCI_mm"]
         for k in EXTREME_KEYS:
             v = q[k][np.isfinite(q[k])]

@@ -11,7 +11,8 @@ import numpy as np
 
 from lts360.inspect import scan as scan_mod
 from lts360.inspect.circles import REFERENCES, least_squares_circle
-from lts360.inspect.extremes import DEFAULT_EXTREME_DRAWS, default_upr, extreme_noise
+from lts360.inspect.extremes import (CIRCLE_SECTIONS, DEFAULT_EXTREME_DRAWS, default_upr,
+                                     extreme_noise)
 from lts360.inspect.nominal import Nominal, ToleranceBand, deviations, place_nominal
 from lts360.inspect.profile import DEFAULT_BIN_DEG, DEFAULT_GAP_DEG, valid_mask
 from lts360.inspect.section import MIN_POINTS, SectionResult, analyse_section
@@ -233,7 +234,9 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         u_cal = calibration_u(xy_list, view_list, calibration, n_draws=n_draws, seed=seed)
         cal_note = (f"Monte Carlo over {n_draws} calibration draws (seed {seed})"
                     if u_cal is not None else "the calibration carries no covariance: 0")
-    rows = []
+    rows, exs = [], []
+    picks = np.unique(np.round(np.linspace(0, len(sections) - 1,
+                                           min(CIRCLE_SECTIONS, len(sections)))).astype(int))
     for i, s in enumerate(sections):
         raw = s.extra.get("raw_profile", s.profile)  # unfiltered
         u_mean, tau, s_bin = correlated_mean_u(raw.theta_rad, raw.r_mm, s.ls.radius_mm,
@@ -245,7 +248,14 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         rho = (tau - 1) / (tau + 1) if np.isfinite(tau) else 0.0
         ex = extreme_noise(raw, upr=filter_upr, s_bin_mm=bin_u, rho=rho,
                            form_upr=form_upr or 150.0, n_draws=extreme_draws,
-                           rng=np.random.SeedSequence([seed, int(s.index)]), gap_deg=gap_deg)
+                           rng=np.random.SeedSequence([seed, int(s.index)]), gap_deg=gap_deg,
+                           circles=i in picks)
+        exs.append((ex, us, tau))
+    for i, (ex, _, _) in enumerate(exs):  # the MCCI's and MICI's from the nearest section fitted
+        j = int(picks[np.argmin(np.abs(picks - i))])
+        for k in ("ront_MCCI_mm", "ront_MICI_mm"):
+            ex.bias_mm[k], ex.u_mm[k] = exs[j][0].bias_mm[k], exs[j][0].u_mm[k]
+    for i, (s, (ex, us, tau)) in enumerate(zip(sections, exs)):
         row = _section_dict(s, us, None if u_cal is None else u_cal[i], u_radial_mm, ex)
         row["extreme_noise"] = {"s_bin_mm": ex.s_bin_mm, "rho": ex.rho, "n_draws": ex.n_draws,
                                 "bias_mm": ex.bias_mm, "u_mm": ex.u_mm}
