@@ -23,7 +23,10 @@ variance does not (measured on rendered scans: with an AR(1) Gaussian model RONt
 LS circle fell outside U in 11 of 20 realistic PVC sections; on white synthetic noise, where
 the Gaussian model is exact, the bootstrap alone came out 30 % low).  The redrawn noise is
 passed through the same filter and added to the form, and every extreme quantity is
-recomputed.  The
+recomputed.  The Gaussian model's level is raised, where needed, until the noise it puts in
+the band the filter passes above the form's cut-off has the variance the section's own
+residuals have there (a lag-1 model misses longer-range correlation, which the filter passes
+in full: speckle and render noise on the realistic renders).  The
 mean shift over the draws is the bias, their standard deviation the noise's u.  The reported
 value is not corrected (a gauge reports the filtered extreme); the bias enters U linearly:
 ``U = 2 u_c + |bias|`` (:func:`lts360.inspect.run`).
@@ -240,7 +243,19 @@ def extreme_noise(raw: BinnedProfile, *, upr: float | None, s_bin_mm: float, rho
     m = int(np.clip(circle_draws // 2, 2, n_draws))
     bias = {k: float("nan") for k in EXTREME_KEYS}
     u = dict(bias)
-    for noise in (_ar1_noise(rng, n_draws, len(r), s, rho),
+    gauss = _ar1_noise(rng, n_draws, len(r), s, rho)
+    # the Gaussian model's level where it matters: the noise the filter passes, above the
+    # form's cut-off, must have the variance the section's own residuals have in that band
+    # (a lag-1 model misses longer-range correlation, which the filter passes in full)
+    lo = FORM_FRACTION * (form_upr if upr is None else upr)
+    band = (lambda x: filter_grid(x, upr) - filter_grid(x, lo)) if upr is not None else \
+        (lambda x: x - filter_grid(x, lo))
+    obs = band(r)
+    var_obs = float(np.nanmean(obs ** 2)) if np.isfinite(obs).any() else 0.0
+    var_mod = float(np.mean(band(gauss) ** 2))
+    if var_mod > 0 and var_obs > var_mod:
+        gauss = gauss * np.sqrt(var_obs / var_mod)
+    for noise in (gauss,
                   _wild_block_noise(rng, n_draws, np.where(np.isfinite(r), r - form, 0.0), rho)):
         if upr is not None:
             noise = np.fft.irfft(gaussian_transfer(len(r), upr) * np.fft.rfft(noise, axis=1),
