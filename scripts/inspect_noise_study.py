@@ -43,7 +43,7 @@ def study(root: Path, extra: list[str]) -> dict:
                                     s["ront_mm"][ref]["U_k2"])
             rows.append(r)
         scan = data["scan"]
-        out[d.name] = {"exit": rc, "filter": data["settings"]["filter"], "sections": rows,
+        out[d.name] = {"exit": rc, "filter": data["settings"].get("filter", "none"), "sections": rows,
                        "events": scan["events"],
                        "events_not_significant": scan.get("events_not_significant", []),
                        "axis": scan.get("axis"), "cylinder": scan.get("cylindricity"),
