@@ -322,11 +322,14 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         for row, t in zip(rows, trows):
             row["truth"] = t
     import time
+    from importlib.metadata import PackageNotFoundError, version
 
-    from lts360 import __version__
-
+    try:
+        tool_version = version("lts360")
+    except PackageNotFoundError:  # run from a source tree
+        tool_version = "0+unknown"
     inspection.data = {
-        "tool": {"name": "lts360", "version": __version__},
+        "tool": {"name": "lts360", "version": tool_version},
         "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "source": source, "n_sections": len(sections), "sections_skipped": skipped,
         "units": "lengths in mm, angles in deg; {value, u, U_k2}: U_k2 = 2u",
