@@ -413,7 +413,8 @@ def _html(data: dict, figs: dict[str, bytes]) -> str:
     style = ("body{font-family:sans-serif;margin:1em;font-size:13px;max-width:100%}"
              "table{border-collapse:collapse;margin:.5em 0 1.5em}td,th{border:1px solid #bbb;"
              "padding:2px 6px;text-align:right;overflow-wrap:anywhere}th{background:#eee}"
-             "table.kv{max-width:100%}table.kv td:first-child{text-align:left}"
+             "table.kv{max-width:100%}table.kv td:first-child{text-align:left;overflow-wrap:normal;"
+             "min-width:9em}"
              "table.kv td:last-child{text-align:left}"
              "div.wide{max-width:100%;overflow-x:auto}"
              ".verdict{font-size:28px;font-weight:bold;padding:.4em .6em;margin:.3em 0 .8em;"
@@ -426,6 +427,7 @@ def _html(data: dict, figs: dict[str, bytes]) -> str:
             f"<style>{style}</style></head><body>" + _banner(data)
             + f"<h1>Inspection of {html.escape(data['source'])}</h1>"
             + _table(["", ""], about).replace("<table>", "<table class='kv'>", 1)
+            .replace("<thead><tr><th></th><th></th></tr></thead>", "", 1)
             + "<p>Values ± U(k = 2); lengths in mm unless stated. Roundness RONt against the"
             " ISO 12181 reference circles LSCI, MZCI, MCCI, MICI. Ovality Δ/Σ = (Dmax − Dmin)/"
             "(Dmax + Dmin), Δ/D̄ = (Dmax − Dmin)/D_mean. The U of D min, D max, ovality and "
