@@ -111,3 +111,17 @@ def test_tolerances_give_the_exit_status_a_line_acts_on(files, tmp_path, capsys)
     s = data["sections"][0]["checks"]
     assert s["diameter"]["conformance_iso14253"] == "does not conform"  # 0.1 mm out, U ~ µm
     assert "FAIL" in capsys.readouterr().out
+
+
+def test_measure_names_the_frame_json_of_a_scan_folder(tmp_path, capsys):
+    """A scan folder has no frame.json of its own: `measure` says which file to use."""
+    scan = tmp_path / "scan"
+    (scan / "section_0000").mkdir(parents=True)
+    (scan / "scan.json").write_text("{}")
+    (scan / "section_0000" / "frame.json").write_text("{}")
+    assert main(["measure", str(scan), "--calibration", str(scan / "frame.json"), "--out",
+                 str(tmp_path / "c.ply")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "--calibration" in lines[0]
+    assert str(scan / "section_0000" / "frame.json") in lines[0]
+    assert not (tmp_path / "c.ply").exists()
