@@ -54,3 +54,26 @@ def scan_cloud(n_sections=12, pitch_mm=0.68, *, R=10.0, ovality_mm=0.2, dent_mm=
         parts.append(Cloud(pts, th, r, (np.arange(th.size) % 3).astype(np.uint8), q,
                            np.full(th.size, k, np.int32), np.ones(th.size, np.float32)))
     return Cloud.concatenate(parts)
+
+
+def noisy_section_cloud(seed, *, noise_mm, rho=0.0, R=16.0, ovality_mm=0.8, dent_mm=0.6,
+                        dent_sigma_arc_mm=3.0, step_deg=STEP_DEG):
+    """One section of the PVC pipe's shape (oval, a dent at θ = −90°) with seeded noise on the
+    radius of each point, white or AR(1) along θ with lag-1 correlation ``rho`` (point to
+    point), as a Cloud; and the same section without noise (its truth)."""
+    rng = np.random.default_rng(seed)
+    th = np.radians(np.arange(-180.0, 180.0, step_deg))
+    r0 = (R + ovality_mm / 4 * np.cos(2 * th)
+          - dent_mm * np.exp(-(1 - np.cos(th + np.pi / 2)) * (R / dent_sigma_arc_mm) ** 2))
+    e = rng.normal(size=th.size)
+    if rho > 0:
+        from scipy.signal import lfilter
+
+        e = lfilter([np.sqrt(1 - rho**2)], [1, -rho], e)
+    out = []
+    for r in (r0 + noise_mm * e, r0):
+        pts = np.column_stack([r * np.cos(th), r * np.sin(th), np.zeros(th.size)])
+        out.append(Cloud(pts, th, r, (np.arange(th.size) % 3).astype(np.uint8),
+                         np.zeros(th.size, np.uint8), np.zeros(th.size, np.int32),
+                         np.ones(th.size, np.float32)))
+    return out[0], out[1]

@@ -74,3 +74,54 @@ def test_a_radial_offset_adds_to_sizes_only():
     for key in ("ovality_mm", "centre_x_mm"):
         assert b[key]["u"] == a[key]["u"]
     assert b["ront_mm"]["MZCI"]["u"] == a["ront_mm"]["MZCI"]["u"]
+
+
+@pytest.mark.parametrize("args,field", [
+    (("--diameter-mm", "32±-0.3"), "--diameter-mm"),
+    (("--diameter-mm", "32"), "--diameter-mm"),
+    (("--ovality-max-mm", "-1"), "--ovality-max-mm"),
+    (("--filter-upr", "0"), "--filter-upr"),
+    (("--filter-upr", "50", "--filter", "none"), "--filter-upr"),
+    (("--nominal", "-3"), "--nominal"),
+])
+def test_bad_tolerances_and_filters_are_one_line_exit_2(args, field, files, tmp_path, capsys):
+    out = tmp_path / "report"
+    assert main(["inspect", str(files / "scan.ply"), *args, "--out", str(out)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and field in lines[0]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_tolerances_give_the_exit_status_a_line_acts_on(files, tmp_path, capsys):
+    """The scan's sections are Ø 20 mm with 0.2 mm ovality: D min 19.9, D max 20.1."""
+    ok = tmp_path / "ok"
+    assert main(["inspect", str(files / "scan.ply"), "--out", str(ok), "--nominal", "20",
+                 "--diameter-mm", "20±0.3", "--ovality-max-mm", "0.5"]) == 0
+    data = json.loads((ok / "inspection.json").read_text())
+    assert data["verdict"] == {"pass": True, "failed": []}
+    assert data["nominal"]["source"] == "Ø 20 mm"
+    assert data["command"].startswith("lts360 inspect") and data["tool"]["version"]
+    assert data["settings"]["filter"].startswith("ISO 12181-2 Gaussian, 50 UPR")
+    assert "PASS" in capsys.readouterr().out
+    bad = tmp_path / "bad"
+    assert main(["inspect", str(files / "scan.ply"), "--out", str(bad),
+                 "--diameter-mm", "20+-0.05", "--ovality-max-mm", "0.1"]) == 1
+    data = json.loads((bad / "inspection.json").read_text())
+    assert data["verdict"]["pass"] is False and len(data["verdict"]["failed"]) == 6
+    s = data["sections"][0]["checks"]
+    assert s["diameter"]["conformance_iso14253"] == "does not conform"  # 0.1 mm out, U ~ µm
+    assert "FAIL" in capsys.readouterr().out
+
+
+def test_measure_names_the_frame_json_of_a_scan_folder(tmp_path, capsys):
+    """A scan folder has no frame.json of its own: `measure` says which file to use."""
+    scan = tmp_path / "scan"
+    (scan / "section_0000").mkdir(parents=True)
+    (scan / "scan.json").write_text("{}")
+    (scan / "section_0000" / "frame.json").write_text("{}")
+    assert main(["measure", str(scan), "--calibration", str(scan / "frame.json"), "--out",
+                 str(tmp_path / "c.ply")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "--calibration" in lines[0]
+    assert str(scan / "section_0000" / "frame.json") in lines[0]
+    assert not (tmp_path / "c.ply").exists()

@@ -3,6 +3,7 @@ and the HTML page opened in a real headless browser."""
 
 import csv
 import json
+import os
 import shutil
 import subprocess
 
@@ -21,6 +22,10 @@ def report_dir(tmp_path_factory):
     cloud = scan_cloud(n_sections=6, dent_mm=0.1, dent_z_mm=0.34, noise_mm=0.001)
     ins = inspect_cloud(cloud, nominal=load_nominal("plug-gauge:d=20"),
                         band=ToleranceBand.symmetric(0.08), source="synthetic.ply")
+    # long unbroken values, as a scan's truth spec or a deep path: they must wrap
+    ins.data["command"] = "lts360 inspect " + "/very/long/unbroken/path" * 12 + "/cloud.ply"
+    ins.data["truth"] = {"object": "pvc-pipe:" + ",".join(f"p{i}=0.123456789" for i in range(30)),
+                         "analytic": True}
     return write_report(ins, tmp_path_factory.mktemp("r") / "report")
 
 
@@ -36,8 +41,15 @@ def test_files_json_and_csv(report_dir):
     # 100.0° < θ < 104.0° in 0.1° float steps: 40 samples
     assert s["gaps"] and s["gaps"][0]["flags"] == {"NO_PEAK": 40}
     assert data["nominal"]["pass"] is False  # ±0.04 mm: the ovality (±0.05 mm) breaks it
+    assert data["tool"]["name"] == "lts360" and data["date_utc"].endswith("Z")
+    assert data["settings"]["filter"].startswith("ISO 12181-2 Gaussian, 50 UPR")
+    assert data["verdict"] == {"pass": False, "failed": ["profile zone"]}
     rows = list(csv.DictReader(open(report_dir / "sections.csv")))
-    assert len(rows) == 6 and "U_d_ls_mm" in rows[0] and "ront_mzci_mm" in rows[0]
+    assert len(rows) == 6 and "U_k2_d_ls_mm" in rows[0] and "ront_mzci_mm" in rows[0]
+    assert "scatter_1sigma_mm" in rows[0]
+    assert rows[0]["pass"] == "false"  # not Python's False
+    for key in ("d_ls_mm", "U_k2_d_max_mm", "ront_mzci_mm", "scatter_1sigma_mm"):
+        assert len(rows[0][key].split(".")[1]) == 4, key  # 0.1 µm, no 17-digit floats
 
 
 def test_a_failed_write_leaves_nothing(tmp_path, monkeypatch):
@@ -59,11 +71,71 @@ _CHECK = """<script>window.addEventListener('load', () => {
 });</script></body>"""
 
 
-def test_the_page_renders_in_a_headless_browser(report_dir, tmp_path):
+def _chromium():
     exe = shutil.which("chromium") or shutil.which("chromium-browser")
     if exe is None:
+        if os.environ.get("CI") == "true":
+            pytest.fail("CI=true but chromium is not installed: the report must be opened in "
+                        "a browser there (.ci/run installs it)")
         pytest.skip("chromium is not installed (apt-get install chromium): the page is not "
                     "opened in a browser")
+    return exe
+
+
+_VIEWPORT = """<script>window.addEventListener('load', () => {
+  const W = window.innerWidth, H = window.innerHeight;
+  const inside = e => { const r = e.getBoundingClientRect();
+    return r.left >= 0 && r.right <= W + 0.5 && r.width > 0; };
+  const scan = [...document.querySelectorAll('#scan td')];
+  const v = document.getElementById('verdict');
+  const vr = v.getBoundingClientRect();
+  const wide = [...document.body.querySelectorAll('*')].filter(e =>
+    !e.closest('div.wide') && e.tagName !== 'SCRIPT' && e.getBoundingClientRect().right > W + 0.5)
+    .map(e => e.tagName + (e.id ? '#' + e.id : ''));
+  const pre = document.createElement('pre'); pre.id = 'check';
+  pre.textContent = JSON.stringify({W, H, scan_cells: scan.length,
+    scan_inside: scan.filter(inside).length, verdict: v.textContent,
+    verdict_inside: inside(v) && vr.top >= 0 && vr.bottom <= H, wide,
+    scroll_width: document.documentElement.scrollWidth});
+  document.body.appendChild(pre);
+});</script></body>"""
+
+
+def test_at_1024_px_the_verdict_and_the_scan_table_are_inside_the_viewport(report_dir,
+                                                                         tmp_path):
+    """In a real headless browser at 1024 × 768: the FAIL banner is the first thing on screen
+    (in the screenshot's top rows, in its colour), every value of the scan table lies inside
+    the page's width, no element outside a scrolling table box is wider than the page, and
+    long unbroken values (command, truth) wrap."""
+    exe = _chromium()
+    page = tmp_path / "page.html"
+    page.write_text((report_dir / "report.html").read_text().replace("</body>", _VIEWPORT))
+    flags = [exe, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+             "--window-size=1024,768", "--virtual-time-budget=5000"]
+    proc = subprocess.run([*flags, "--dump-dom", page.as_uri()], capture_output=True,
+                          text=True, timeout=120)
+    dom = proc.stdout
+    assert '<pre id="check">' in dom, proc.stderr[-2000:]
+    check = json.loads(dom.split('<pre id="check">')[1].split("</pre>")[0]
+                       .replace("&quot;", '"'))
+    assert check["W"] == 1024
+    assert check["verdict"].startswith("FAIL") and check["verdict_inside"]
+    assert check["scan_cells"] >= 10 and check["scan_inside"] == check["scan_cells"]
+    assert check["wide"] == [] and check["scroll_width"] <= 1024
+    shot = tmp_path / "shot.png"
+    proc = subprocess.run([*flags, f"--screenshot={shot}", (report_dir / "report.html").as_uri()],
+                          capture_output=True, text=True, timeout=120)
+    assert shot.is_file(), proc.stderr[-2000:]
+    from matplotlib.image import imread
+
+    img = imread(shot)[..., :3]
+    assert img.shape[1] == 1024
+    red = np.all(np.abs(img[:120] - np.array([0xb3, 0x14, 0x1b]) / 255) < 0.04, axis=-1)
+    assert red.sum() > 20000  # the banner: ~1000 × 45 px of the FAIL colour at the top
+
+
+def test_the_page_renders_in_a_headless_browser(report_dir, tmp_path):
+    exe = _chromium()
     page = tmp_path / "page.html"
     page.write_text((report_dir / "report.html").read_text().replace("</body>", _CHECK))
     proc = subprocess.run([exe, "--headless", "--no-sandbox", "--disable-gpu",

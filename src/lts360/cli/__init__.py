@@ -20,6 +20,7 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         args = build_parser().parse_args(argv)
+        args.argv = list(sys.argv[1:] if argv is None else argv)  # the command, for reports
         return int(args.func(args) or 0)
     except UsageError as exc:
         print(str(exc) if str(exc).startswith("lts360") else f"lts360: error: {exc}", file=sys.stderr)

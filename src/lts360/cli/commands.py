@@ -3,6 +3,7 @@ inspect."""
 
 from __future__ import annotations
 
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -217,6 +218,18 @@ def _render_moving(args, rig, obj, acq, out: Path, variant: str) -> int:
     return 0
 
 
+def _scan_calibration_hint(path) -> None:
+    """A calibration path that does not exist inside a scan folder (``SCAN/frame.json``): name
+    the file to use, since each section of a rendered scan holds its own ``frame.json``."""
+    p = Path(path)
+    if p.exists() or not (p.parent / "scan.json").is_file():
+        return
+    first = sorted(p.parent.glob("section_*/frame.json"))
+    if first:
+        raise UsageError(f"--calibration: {p} does not exist; a scan folder holds one frame.json "
+                         f"per section (the same rig): use {first[0]}")
+
+
 def cmd_measure(args) -> int:
     from lts360.recon.calibration.model import load_calibration
     from lts360.recon.triangulation.acceptance import refusal, section_coverage
@@ -246,6 +259,7 @@ def cmd_measure(args) -> int:
         raise UsageError(f"--theta-step-deg: must be in (0, 10], got {args.theta_step_deg}")
     if not 0 < args.r_step_mm <= 0.1:
         raise UsageError(f"--r-step-mm: must be in (0, 0.1], got {args.r_step_mm}")
+    _scan_calibration_hint(args.calibration)
     cal = load_calibration(args.calibration)
     if args.compensate and not any(np.any(v) for v in cal.view_offsets_mm.values()):
         raise UsageError(f"--compensate: {args.calibration} has no view offsets (paper §4.4); "
@@ -505,6 +519,15 @@ def cmd_inspect(args) -> int:
         raise UsageError(f"--u-radial-mm: must be >= 0, got {args.u_radial_mm}")
     if not 2 <= args.draws <= 10000:
         raise UsageError(f"--draws: must be in [2, 10000], got {args.draws}")
+    if args.filter_upr is not None and not (np.isfinite(args.filter_upr)
+                                            and 1 <= args.filter_upr <= 1000):
+        raise UsageError(f"--filter-upr: must be in [1, 1000], got {args.filter_upr:g}")
+    if args.filter == "none" and args.filter_upr is not None:
+        raise UsageError("--filter-upr: give it or --filter none, not both")
+    from lts360.inspect.tolerances import check_ovality_max, parse_diameter_tolerance
+
+    diameter_tol = None if args.diameter_mm is None else parse_diameter_tolerance(args.diameter_mm)
+    ovality_max = None if args.ovality_max_mm is None else check_ovality_max(args.ovality_max_mm)
     band = None
     if args.tolerance_mm is not None:
         band = ToleranceBand.symmetric(args.tolerance_mm)
@@ -532,7 +555,11 @@ def cmd_inspect(args) -> int:
     ins = inspect_cloud(cloud, nominal=nominal, band=band, calibration=cal, truth=truth,
                         lump_threshold_mm=args.lump_mm, n_draws=args.draws, seed=args.seed,
                         u_radial_mm=u_radial, filter_upr=args.filter_upr,
-                        source=str(args.cloud))
+                        use_filter=args.filter != "none", diameter_tol=diameter_tol,
+                        ovality_max_mm=ovality_max, source=str(args.cloud))
+    ins.data["command"] = "lts360 " + " ".join(shlex.quote(a) for a in args.argv) \
+        if getattr(args, "argv", None) else None
+    ins.data["calibration"] = args.calibration
     if u_twin is not None:
         ins.data["settings"]["twin_u_inputs_mm"] = u_twin
         print(f"  the cloud is twin-corrected: its inputs' u ({1e3 * u_twin:.2f} µm radial) is "
@@ -549,8 +576,12 @@ def cmd_inspect(args) -> int:
               f"{1e3 * e['deviation_mm']:+.1f} µm)")
     if d["nominal"] and "pass" in d["nominal"]:
         print(f"  against {d['nominal']['source']}: {'PASS' if d['nominal']['pass'] else 'FAIL'}")
+    if d["verdict"] is not None:
+        v = d["verdict"]
+        print("PASS" if v["pass"] else "FAIL: " + "; ".join(v["failed"][:5])
+              + (f" and {len(v['failed']) - 5} more" if len(v["failed"]) > 5 else ""))
     if d["sections_skipped"]:
         print(f"lts360: inspect: {len(d['sections_skipped'])} section(s) with too few valid "
               f"points left out", file=sys.stderr)
     print(f"wrote {out}/report.html, inspection.json, sections.csv, figures")
-    return 0
+    return 1 if d["verdict"] is not None and not d["verdict"]["pass"] else 0

@@ -181,8 +181,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("cloud", help="cloud.ply written by `lts360 measure`")
     s.add_argument("--out", required=True, help="output directory (report.html, "
                    "inspection.json, sections.csv, figures), replaced as a whole")
-    s.add_argument("--nominal", default=None, help="object SPEC (its analytic contour), "
-                   "CONTOUR.csv (x_mm,y_mm rows, closed) or DRAWING.dxf")
+    s.add_argument("--nominal", default=None, help="a diameter in mm (e.g. 32), object SPEC "
+                   "(its analytic contour), CONTOUR.csv (x_mm,y_mm rows, closed) or DRAWING.dxf")
+    s.add_argument("--diameter-mm", default=None, metavar="D±T",
+                   help="size tolerance, e.g. 32±0.3: D min and D max within (exit 1 if not)")
+    s.add_argument("--ovality-max-mm", type=float, default=None,
+                   help="largest D max − D min (exit 1 if exceeded)")
     s.add_argument("--tolerance-mm", type=float, default=None,
                    help="profile tolerance zone width (ISO 1101): ± half of it about the nominal")
     s.add_argument("--upper-mm", type=float, default=None, help="upper deviation limit")
@@ -197,8 +201,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="type-B standard uncertainty of a radial offset common to a section "
                         "(the rig's error budget): 2u on diameters, u on deviations")
     s.add_argument("--filter-upr", type=float, default=None,
-                   help="ISO 12181-2 Gaussian filter cut-off (undulations per revolution, e.g. "
-                        "50) before roundness and diameters (default: none)")
+                   help="ISO 12181-2 Gaussian filter cut-off in [1, 1000] UPR before roundness "
+                        "and diameters (default: the standard's for the diameter)")
+    s.add_argument("--filter", choices=("gaussian", "none"), default="gaussian",
+                   help="none: no filter (extremes then carry more noise bias in U)")
     s.add_argument("--draws", type=int, default=20, help="calibration Monte Carlo draws")
     s.add_argument("--seed", type=int, default=0)
     s.set_defaults(func=cmd_inspect)

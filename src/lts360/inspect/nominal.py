@@ -1,7 +1,8 @@
 """Nominal section contours and the deviation of a measured profile from them.
 
-Three sources, each giving a closed contour ``(m, 2)`` in mm:
+Four sources, each giving a closed contour ``(m, 2)`` in mm:
 
+* a plain **diameter** (``32``): a circle of that diameter;
 * an **object spec** (``pvc-pipe:ovality=0,dent_depth=0``): the generator's analytic radius
   ``r(θ, z)`` at the spec's parameters, sampled at each section's z (the shape the generator
   was asked for, not a rendered truth; a placement in the spec is ignored);
@@ -25,7 +26,7 @@ import numpy as np
 from lts360.inspect.circles import least_squares_circle
 from lts360.scenes.contour_file import CLOSURE_MM, UNIT_MM
 
-__all__ = ["Nominal", "ToleranceBand", "load_nominal", "nominal_from_spec", "read_contour_csv",
+__all__ = ["Nominal", "ToleranceBand", "load_nominal", "nominal_from_spec", "nominal_circle", "read_contour_csv",
            "read_contour_dxf", "deviations", "UNIT_MM", "CLOSURE_MM"]
 
 #: Sampling of an analytic nominal contour (deg): chord sagitta below 0.1 µm at r = 30 mm.
@@ -116,8 +117,23 @@ def read_contour_dxf(path) -> Nominal:
     return Nominal(source=str(p), fixed_xy_mm=read_dxf_ring(p, f"--nominal {p}"))
 
 
+def nominal_circle(diameter_mm: float) -> Nominal:
+    """A round nominal of ``diameter_mm`` (> 0)."""
+    d = float(diameter_mm)
+    if not (np.isfinite(d) and d > 0):
+        raise ValueError(f"--nominal: a diameter must be > 0 mm, got {diameter_mm}")
+    return Nominal(source=f"Ø {d:g} mm", radius_fn=lambda th, z: np.full_like(th, d / 2.0))
+
+
 def load_nominal(text: str) -> Nominal:
-    """``--nominal``: a ``.csv`` or ``.dxf`` file, else an object spec."""
+    """``--nominal``: a plain number (a round nominal of that diameter, mm), a ``.csv`` or
+    ``.dxf`` file, else an object spec."""
+    try:
+        d = float(text)
+    except ValueError:
+        d = None
+    if d is not None:
+        return nominal_circle(d)
     suffix = Path(text).suffix.lower()
     if suffix == ".csv":
         if not Path(text).is_file():

@@ -42,40 +42,64 @@ def _v(q):
     return None if q is None else q.get("value")
 
 
+#: Decimals of a length in mm in the CSV: 0.1 µm, below every U it carries.
+CSV_MM_DECIMALS = 4
+
+
+def _csv_value(key: str, v):
+    """A CSV cell: lengths to 0.1 µm, percentages and other floats to 4 decimals, booleans as
+    ``true``/``false``, nothing as an empty cell."""
+    if v is None:
+        return ""
+    if isinstance(v, (bool, np.bool_)):
+        return "true" if v else "false"
+    if isinstance(v, (float, np.floating)):
+        if not np.isfinite(v):
+            return ""
+        return f"{float(v):.{CSV_MM_DECIMALS if key.endswith('_mm') else 4}f}"
+    return v
+
+
 def csv_rows(data: dict) -> list[dict]:
-    """One flat row per section (value and U(k = 2) columns, true values where given)."""
+    """One flat row per section: each value beside its expanded uncertainty ``U_k2_…``
+    (k = 2), the point scatter as one standard deviation (``scatter_1sigma_mm``), true values
+    where given; lengths in mm to 0.1 µm, booleans ``true``/``false``."""
     rows = []
     for s in data["sections"]:
         row = {"index": s["index"], "z_mm": s["z_mm"], "n_valid": s["n_valid"],
-               "coverage_deg": round(s["coverage_deg"], 3), "scatter_mm": s["scatter_mm"]}
+               "coverage_deg": round(s["coverage_deg"], 3),
+               "scatter_1sigma_mm": s["scatter_mm"]}
         if "time_s" in s:  # a moving object
             row["time_s"], row["time_span_s"] = s["time_s"], s["time_span_s"]
         for key in ("centre_x_mm", "centre_y_mm", "d_ls_mm", "d_mean_mm", "d_min_mm",
                     "d_max_mm", "ovality_mm", "ovality_over_sum_pct", "ovality_over_mean_pct",
                     "calliper_min_mm", "calliper_max_mm"):
             row[key] = s[key]["value"]
-            row["U_" + key] = s[key]["U_k2"]
+            row["U_k2_" + key] = s[key]["U_k2"]
         for ref in REFERENCES:
             row[f"ront_{ref.lower()}_mm"] = s["ront_mm"][ref]["value"]
-            row[f"U_ront_{ref.lower()}_mm"] = s["ront_mm"][ref]["U_k2"]
+            row[f"U_k2_ront_{ref.lower()}_mm"] = s["ront_mm"][ref]["U_k2"]
         for key in ("a2_mm", "a3_mm"):
             row["harmonic_" + key] = s["harmonics"][key]["value"]
-            row["U_harmonic_" + key] = s["harmonics"][key]["U_k2"]
+            row["U_k2_harmonic_" + key] = s["harmonics"][key]["U_k2"]
         row["dominant_order"] = s["harmonics"]["dominant_order"]
         if "nominal" in s:
             n = s["nominal"]
             row["deviation_min_mm"] = n["deviation_min_mm"]["value"]
             row["deviation_max_mm"] = n["deviation_max_mm"]["value"]
-            row["U_deviation_mm"] = n["deviation_max_mm"]["U_k2"]
+            row["U_k2_deviation_mm"] = n["deviation_max_mm"]["U_k2"]
             if "pass" in n:
                 row["pass"] = n["pass"]
                 row["conformance_iso14253"] = n["conformance_iso14253"]
+        for name, c in s.get("checks", {}).items():
+            row[f"{name}_pass"] = c["pass"]
+            row[f"{name}_conformance_iso14253"] = c["conformance_iso14253"]
         t = s.get("truth")
         if t:
             for key in ("d_ls_mm", "d_min_mm", "d_max_mm", "ovality_mm", "a2_mm", "a3_mm"):
                 row["true_" + key] = t[key]
             row["true_ront_mzci_mm"] = t["ront_mm"]["MZCI"]
-        rows.append(row)
+        rows.append({k: _csv_value(k, v) for k, v in row.items()})
     return rows
 
 
@@ -129,23 +153,31 @@ def _fig_polar(ins: Inspection, k: int) -> bytes:
         for v, lab in ((ins.band.upper_mm, "upper limit"), (ins.band.lower_mm, "lower limit")):
             ax.plot(t, np.full_like(t, 1e3 * v - base), "--", color="tab:orange", lw=1,
                     label=lab)
+    u = np.column_stack([np.cos(t), np.sin(t)])
     for name, c in s.circles.items():
-        # the circle's radius about the LS centre at θ, as a deviation from the LS radius
-        u = np.column_stack([np.cos(t), np.sin(t)])
+        # the circle's radius about the LS centre at θ, as a deviation from the LS radius; the
+        # MZCI is its zone: the inner and the outer circle
         e = c.centre_mm - c0
         b = u @ e
-        rho = b + np.sqrt(np.maximum(c.radius_mm**2 - (e @ e - b * b), 0.0))
-        if isinstance(ref_r, tuple):  # relative to the nominal, as the points
-            o_n = np.argsort(ref_r[0])
-            rho = rho - np.interp(t, ref_r[0][o_n], ref_r[1][o_n], period=2 * np.pi)
-        else:
-            rho = rho - ref_r
-        ax.plot(t, 1e3 * rho - base, color=_REF_COLOURS[name], lw=1,
-                label=f"{name} (RONt {1e3 * c.ront_mm:.1f} µm)")
+        radii = (c.r_min_mm, c.r_max_mm) if name == "MZCI" else (c.radius_mm,)
+        for j, radius in enumerate(radii):
+            rho = b + np.sqrt(np.maximum(radius**2 - (e @ e - b * b), 0.0))
+            if isinstance(ref_r, tuple):  # relative to the nominal, as the points
+                o_n = np.argsort(ref_r[0])
+                rho = rho - np.interp(t, ref_r[0][o_n], ref_r[1][o_n], period=2 * np.pi)
+            else:
+                rho = rho - ref_r
+            label = (f"MZCI zone, two circles (RONt {1e3 * c.ront_mm:.1f} µm)" if name == "MZCI"
+                     else f"{name} (RONt {1e3 * c.ront_mm:.1f} µm)")
+            ax.plot(t, 1e3 * rho - base, color=_REF_COLOURS[name], lw=1,
+                    ls="--" if name == "MZCI" else "-", label=None if j else label)
     ax.set_rorigin(0)
     ax.set_ylim(0, lim[1] - base + 0.1 * span)
-    ticks = np.linspace(lim[0], lim[1], 4)
-    ax.set_yticks(ticks - base, [f"{v:.0f}" for v in ticks])
+    from matplotlib.ticker import MaxNLocator
+
+    ticks = [v for v in MaxNLocator(5, steps=[1, 2, 2.5, 5, 10]).tick_values(*lim)
+             if lim[0] - 0.05 * span <= v <= lim[1] + 0.1 * span]
+    ax.set_yticks(np.array(ticks) - base, [f"{v:g}" for v in ticks], fontsize=8)
     ax.set_title(f"section {s.index}, z = {s.z_mm:.2f} mm: {what} (µm)", fontsize=9)
     ax.legend(loc="upper left", bbox_to_anchor=(-0.05, -0.04), fontsize=7, ncol=2)
     return _png(fig)
@@ -225,7 +257,8 @@ def _fig_map(ins: Inspection) -> bytes:
 def _fig_harmonics(ins: Inspection, k: int) -> bytes:
     s = ins.sections[k]
     h = s.harmonics
-    fig = _figure(7.0, 3.0)
+    fig = _figure(7.0, 3.2)
+    fig.subplots_adjust(bottom=0.18)  # room for the x label
     ax = fig.add_subplot()
     ax.bar(h.orders, 1e3 * h.amplitude_mm, color="tab:blue", width=0.7)
     u = ins.data["sections"][k]["harmonics"]["u_amplitude_mm"]
@@ -255,21 +288,57 @@ def _table(header, rows) -> str:
     return f"<table><thead><tr>{h}</tr></thead><tbody>{b}</tbody></table>"
 
 
+def _banner(data: dict) -> str:
+    """The verdict first: PASS or FAIL (and what failed), or that no tolerance was given."""
+    v = data.get("verdict")
+    if v is None:
+        return ('<div class="verdict none" id="verdict">NO VERDICT: no tolerance given '
+                '(--diameter-mm, --ovality-max-mm, --tolerance-mm)</div>')
+    if v["pass"]:
+        return '<div class="verdict pass" id="verdict">PASS</div>'
+    failed = ", ".join(html.escape(f) for f in v["failed"][:8])
+    more = f" and {len(v['failed']) - 8} more" if len(v["failed"]) > 8 else ""
+    return f'<div class="verdict fail" id="verdict">FAIL: {failed}{more}</div>'
+
+
 def _html(data: dict, figs: dict[str, bytes]) -> str:
     scan = data["scan"]
+    st = data["settings"]
+    tool = data.get("tool") or {}
+    about = [("tool", html.escape(f"{tool.get('name', 'lts360')} {tool.get('version', '')}")),
+             ("date (UTC)", html.escape(str(data.get("date_utc") or "—"))),
+             ("command", f"<code>{html.escape(str(data.get('command') or '—'))}</code>"),
+             ("calibration", html.escape(str(data.get("calibration") or "not given"))),
+             ("filter", html.escape(st.get("filter", "—"))),
+             ("extremes", html.escape(st.get("extremes", "—")))]
     summary = [("sections", data["n_sections"]),
                ("calibration uncertainty",
                 html.escape(data["settings"]["calibration_uncertainty"]))]
+    tol = data.get("tolerances")
+    if tol:
+        if tol["diameter_mm"]:
+            d = tol["diameter_mm"]
+            summary.append(("diameter tolerance (mm)", f"{d['nominal_mm']:g} ± {d['tol_mm']:g}"
+                            f" (D min ≥ {d['lower_mm']:g}, D max ≤ {d['upper_mm']:g})"))
+        if tol["ovality_max_mm"] is not None:
+            summary.append(("ovality limit (mm)", f"≤ {tol['ovality_max_mm']:g}"))
     tr = scan["trends"]["d_ls_mm"]
     summary.append(("mean LS diameter (mm)", _fmt(tr["mean"], nd=5)))
     if tr["slope_per_mm"] is not None:
         summary.append(("LS diameter trend (µm/mm)", _fmt(1e3 * tr["slope_per_mm"], nd=3)))
     if "axis" in scan:
-        summary += [("axis tilt (deg)", _fmt(scan["axis"]["tilt_deg"], nd=4)),
-                    ("straightness of the centres (mm)", _fmt(scan["axis"]["straightness_mm"])),
-                    ("cylindricity CYLt, LS (mm)", _fmt(scan["cylindricity"]["cylt_mm"])),
-                    ("dominant wavelength of D along z (mm)",
-                     _fmt(scan["diameter_spectrum"]["dominant_wavelength_mm"], nd=2))]
+        a = scan["axis"]
+        tilt = (html.escape(a["note"]) if a.get("note") else
+                f"{a['tilt_deg']:.4f} ± {a['U_tilt_deg']:.4f}" if "U_tilt_deg" in a
+                else _fmt(a["tilt_deg"], nd=4))
+        spec = scan["diameter_spectrum"]
+        wl = (html.escape(spec["note"]) if spec.get("note") else
+              _fmt(spec["dominant_wavelength_mm"], nd=2))
+        summary += [("axis tilt (deg)", tilt),
+                    ("straightness of the centres (mm)", _fmt(a["straightness_mm"])),
+                    ("cylindricity CYLt about the centres' axis (mm)",
+                     _fmt(scan["cylindricity"]["cylt_mm"])),
+                    ("dominant wavelength of D along z (mm)", wl)]
     if data["nominal"]:
         n = data["nominal"]
         summary.append(("nominal", html.escape(n["source"])))
@@ -278,6 +347,9 @@ def _html(data: dict, figs: dict[str, bytes]) -> str:
                         ("scan", "<b>PASS</b>" if n["pass"] else "<b>FAIL</b>")]
     if data["truth"]:
         summary.append(("truth", html.escape(data["truth"]["object"])))
+    if data.get("verdict") is not None:
+        v = data["verdict"]
+        summary.append(("verdict", "<b>PASS</b>" if v["pass"] else "<b>FAIL</b>"))
     head = ["#", "z (mm)", "cov. (°)", "D LS (mm)", "D min (mm)", "D max (mm)",
             "ovality (mm)", "ovality Δ/Σ (%)", "ovality Δ/D̄ (%)"] + \
         [f"RONt {r} (µm)" for r in REFERENCES] + ["A₃ (µm)"]
@@ -285,6 +357,9 @@ def _html(data: dict, figs: dict[str, bytes]) -> str:
     has_truth = any(s.get("truth") for s in data["sections"])
     if has_nom:
         head += ["dev. min (µm)", "dev. max (µm)", "result"]
+    has_checks = any(s.get("checks") for s in data["sections"])
+    if has_checks:
+        head += ["tolerances"]
     if has_truth:
         head += ["true D LS", "true ovality", "true RONt MZ (µm)", "true A₃ (µm)"]
     body = []
@@ -299,19 +374,33 @@ def _html(data: dict, figs: dict[str, bytes]) -> str:
             r += [_fmt(n.get("deviation_min_mm"), 1e3, 1), _fmt(n.get("deviation_max_mm"), 1e3, 1),
                   ("pass" if n.get("pass") else "fail") + f" ({n['conformance_iso14253']})"
                   if "pass" in n else "—"]
+        if has_checks:
+            r += ["; ".join(f"{k}: {'pass' if c['pass'] else 'FAIL'} "
+                            f"({c['conformance_iso14253']})"
+                            for k, c in s.get("checks", {}).items()) or "—"]
         if has_truth:
             t = s.get("truth") or {}
             r += [_fmt(t.get("d_ls_mm")), _fmt(t.get("ovality_mm")),
                   _fmt(None if not t else 1e3 * t["ront_mm"]["MZCI"], nd=1),
                   _fmt(None if not t else 1e3 * t["a3_mm"], nd=1)]
         body.append(r)
-    events = _table(["kind", "z start (mm)", "z end (mm)", "length (mm)", "z extreme (mm)",
-                     "deviation (µm)"],
-                    [[e["kind"], f"{e['z_start_mm']:.2f}", f"{e['z_end_mm']:.2f}",
-                      f"{e['length_mm']:.2f}", f"{e['z_extreme_mm']:.2f}",
-                      f"{1e3 * e['deviation_mm']:+.1f}"] for e in scan["events"]]) \
-        if scan["events"] else "<p>none beyond the threshold of " \
-        f"{1e3 * data['settings']['lump_threshold_mm']:.0f} µm</p>"
+    def _ev_rows(evs):
+        return [[e["kind"], f"{e['z_start_mm']:.2f}", f"{e['z_end_mm']:.2f}",
+                 f"{e['length_mm']:.2f}", f"{e['z_extreme_mm']:.2f}",
+                 f"{1e3 * e['deviation_mm']:+.1f}",
+                 "—" if e.get("U_k2_mm") is None else f"{1e3 * e['U_k2_mm']:.1f}",
+                 "—" if e.get("confidence") is None else f"{100 * e['confidence']:.0f} %"]
+                for e in evs]
+
+    ev_head = ["kind", "z start (mm)", "z end (mm)", "length (mm)", "z extreme (mm)",
+               "deviation (µm)", "U(k = 2) (µm)", "P(beyond threshold)"]
+    thr = f"{1e3 * data['settings']['lump_threshold_mm']:.0f} µm"
+    events = (_table(ev_head, _ev_rows(scan["events"])) if scan["events"]
+              else f"<p>none significant beyond the threshold of {thr}</p>")
+    if scan.get("events_not_significant"):
+        events += (f"<p>Beyond {thr} but within their own U (not significant, not "
+                   "reported as events):</p>"
+                   + _table(ev_head, _ev_rows(scan["events_not_significant"])))
     gaps = [[s["index"], f"{g['start_deg']:.1f}", f"{g['end_deg']:.1f}", f"{g['width_deg']:.1f}",
              html.escape(", ".join(f"{k}: {v}" for k, v in g["flags"].items()))]
             for s in data["sections"] for g in s["gaps"]]
@@ -321,17 +410,33 @@ def _html(data: dict, figs: dict[str, bytes]) -> str:
     imgs = "".join(f'<figure><img alt="{html.escape(n)}" src="data:image/png;base64,'
                    f'{base64.b64encode(b).decode("ascii")}"><figcaption>{html.escape(n)}'
                    "</figcaption></figure>" for n, b in figs.items())
-    style = ("body{font-family:sans-serif;margin:1.5em;font-size:13px}table{border-collapse:"
-             "collapse;margin:.5em 0 1.5em}td,th{border:1px solid #bbb;padding:2px 6px;"
-             "text-align:right}th{background:#eee}figure{display:inline-block;margin:.5em}"
-             "img{max-width:100%}")
-    return ("<!DOCTYPE html><html><head><meta charset='utf-8'><title>lts360 inspection</title>"
-            f"<style>{style}</style></head><body><h1>Inspection of {html.escape(data['source'])}"
-            "</h1><p>Values ± U(k = 2); lengths in mm unless stated. Roundness RONt against the"
+    style = ("body{font-family:sans-serif;margin:1em;font-size:13px;max-width:100%}"
+             "table{border-collapse:collapse;margin:.5em 0 1.5em}td,th{border:1px solid #bbb;"
+             "padding:2px 6px;text-align:right;overflow-wrap:anywhere}th{background:#eee}"
+             "table.kv{max-width:100%}table.kv td:first-child{text-align:left;overflow-wrap:normal;"
+             "min-width:9em}"
+             "table.kv td:last-child{text-align:left}"
+             "div.wide{max-width:100%;overflow-x:auto}"
+             ".verdict{font-size:28px;font-weight:bold;padding:.4em .6em;margin:.3em 0 .8em;"
+             "overflow-wrap:anywhere}.pass{background:#1b7f2a;color:#fff}"
+             ".fail{background:#b3141b;color:#fff}.none{background:#ddd;color:#000}"
+             "figure{display:inline-block;margin:.5em;max-width:100%}img{max-width:100%}"
+             "h1{font-size:18px;overflow-wrap:anywhere}code{white-space:pre-wrap}")
+    return ("<!DOCTYPE html><html><head><meta charset='utf-8'>"
+            "<meta name='viewport' content='width=device-width'><title>lts360 inspection</title>"
+            f"<style>{style}</style></head><body>" + _banner(data)
+            + f"<h1>Inspection of {html.escape(data['source'])}</h1>"
+            + _table(["", ""], about).replace("<table>", "<table class='kv'>", 1)
+            .replace("<thead><tr><th></th><th></th></tr></thead>", "", 1)
+            + "<p>Values ± U(k = 2); lengths in mm unless stated. Roundness RONt against the"
             " ISO 12181 reference circles LSCI, MZCI, MCCI, MICI. Ovality Δ/Σ = (Dmax − Dmin)/"
-            "(Dmax + Dmin), Δ/D̄ = (Dmax − Dmin)/D_mean.</p><h2>Scan</h2>"
-            + _table(["quantity", "value"], summary) + "<h2>Lumps and neck-downs</h2>" + events
-            + "<h2>Sections</h2>" + _table(head, body) + warn + "<h2>Gaps (no valid point)</h2>"
+            "(Dmax + Dmin), Δ/D̄ = (Dmax − Dmin)/D_mean. The U of D min, D max, ovality and "
+            "RONt includes the noise bias of the extremes (not corrected).</p><h2>Scan</h2>"
+            + _table(["quantity", "value"], summary).replace("<table>", "<table class='kv' "
+                                                             "id='scan'>", 1)
+            + "<h2>Lumps and neck-downs</h2><div class='wide'>" + events + "</div>"
+            + "<h2>Sections</h2><div class='wide'>" + _table(head, body) + "</div>" + warn
+            + "<h2>Gaps (no valid point)</h2>"
             + (_table(["section", "from (°)", "to (°)", "width (°)", "flags"], gaps) if gaps
                else "<p>none</p>") + "<h2>Figures</h2>" + imgs + "</body></html>")
 

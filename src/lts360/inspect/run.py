@@ -10,7 +10,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lts360.inspect import scan as scan_mod
-from lts360.inspect.circles import REFERENCES
+from lts360.inspect.circles import REFERENCES, least_squares_circle
+from lts360.inspect.extremes import (CIRCLE_SECTIONS, DEFAULT_EXTREME_DRAWS, default_upr,
+                                     extreme_noise)
 from lts360.inspect.nominal import Nominal, ToleranceBand, deviations, place_nominal
 from lts360.inspect.profile import DEFAULT_BIN_DEG, DEFAULT_GAP_DEG, valid_mask
 from lts360.inspect.section import MIN_POINTS, SectionResult, analyse_section
@@ -39,13 +41,30 @@ class Inspection:
     band: ToleranceBand | None = None
 
 
-def _q(value, *u_parts) -> dict:
+def _q(value, *u_parts, bias=None) -> dict:
+    """``{value, u, U_k2}``; with the noise ``bias`` of an extreme (not corrected) also
+    ``bias_mm`` and ``U_k2 = 2u + |bias|``."""
     v = None if value is None or not np.isfinite(value) else float(value)
-    return {"value": v, **combine(*u_parts)}
+    out = {"value": v, **combine(*u_parts)}
+    if bias is not None and np.isfinite(bias):
+        out["bias_mm"] = float(bias)
+        out["U_k2"] = out["U_k2"] + abs(float(bias))
+    return out
 
 
-def _section_dict(s: SectionResult, us: dict, uc: dict | None, u_radial_mm: float) -> dict:
+def _section_dict(s: SectionResult, us: dict, uc: dict | None, u_radial_mm: float,
+                  ex=None) -> dict:
+    """``ex`` (:class:`lts360.inspect.extremes.ExtremeNoise`): the extremes' u from the
+    section's noise (in place of the scatter table's) and their bias, carried in U."""
     g = (uc or {}).get
+    if ex is not None:
+        us = {**us, "d_min_mm": ex.u_mm["d_min_mm"], "d_max_mm": ex.u_mm["d_max_mm"],
+              "ovality_mm": ex.u_mm["ovality_mm"],
+              "calliper_min_mm": ex.u_mm["d_min_mm"], "calliper_max_mm": ex.u_mm["d_max_mm"]}
+        b = ex.bias_mm
+    else:
+        us = {**us, "calliper_min_mm": us["calliper_mm"], "calliper_max_mm": us["calliper_mm"]}
+        b = {}
     ub = 2.0 * u_radial_mm if u_radial_mm else None  # a common radial offset: 2u on sizes
     d = s.diameters
     ls = s.ls
@@ -59,21 +78,28 @@ def _section_dict(s: SectionResult, us: dict, uc: dict | None, u_radial_mm: floa
            "centre_y_mm": _q(ls.centre_mm[1], us["centre_y_mm"], g("centre_y_mm")),
            "d_ls_mm": _q(ls.diameter_mm, us["d_ls_mm"], g("d_ls_mm"), ub),
            "d_mean_mm": _q(d.d_mean_mm, us["d_mean_mm"], g("d_mean_mm"), ub),
-           "d_min_mm": _q(d.d_min_mm, us["d_min_mm"], g("d_min_mm"), ub),
-           "d_max_mm": _q(d.d_max_mm, us["d_max_mm"], g("d_max_mm"), ub),
+           "d_min_mm": _q(d.d_min_mm, us["d_min_mm"], g("d_min_mm"), ub,
+                          bias=b.get("d_min_mm")),
+           "d_max_mm": _q(d.d_max_mm, us["d_max_mm"], g("d_max_mm"), ub,
+                          bias=b.get("d_max_mm")),
            "phi_d_min_deg": d.phi_d_min_deg, "phi_d_max_deg": d.phi_d_max_deg,
            "n_directions_measured": d.n_directions_measured,
-           "ovality_mm": _q(d.ovality_mm, us["ovality_mm"], g("ovality_mm")),
-           "calliper_min_mm": _q(d.calliper_min_mm, us["calliper_mm"], g("d_min_mm"), ub),
-           "calliper_max_mm": _q(d.calliper_max_mm, us["calliper_mm"], g("d_max_mm"), ub)}
-    uo = out["ovality_mm"]["u"]
+           "ovality_mm": _q(d.ovality_mm, us["ovality_mm"], g("ovality_mm"),
+                            bias=b.get("ovality_mm")),
+           "calliper_min_mm": _q(d.calliper_min_mm, us["calliper_min_mm"], g("d_min_mm"), ub,
+                                 bias=b.get("d_min_mm")),
+           "calliper_max_mm": _q(d.calliper_max_mm, us["calliper_max_mm"], g("d_max_mm"), ub,
+                                 bias=b.get("d_max_mm"))}
+    uo = out["ovality_mm"]["U_k2"] / 2
     if np.isfinite(d.ovality_mm):
         out["ovality_over_sum_pct"] = _q(d.ovality_over_sum_pct,
                                          100 * uo / (d.d_max_mm + d.d_min_mm))
         out["ovality_over_mean_pct"] = _q(d.ovality_over_mean_pct, 100 * uo / d.d_mean_mm)
     else:
         out["ovality_over_sum_pct"] = out["ovality_over_mean_pct"] = _q(None)
-    out["ront_mm"] = {name: _q(c.ront_mm, us["ront_mm"], g("ront_lsci_mm"))
+    out["ront_mm"] = {name: _q(c.ront_mm, ex.u_mm[f"ront_{name}_mm"] if ex is not None
+                               else us["ront_mm"], g("ront_lsci_mm"),
+                               bias=b.get(f"ront_{name}_mm"))
                       for name, c in s.circles.items()}
     out["reference_circles"] = {
         name: {"centre_x_mm": float(c.centre_mm[0]), "centre_y_mm": float(c.centre_mm[1]),
@@ -90,7 +116,8 @@ def _section_dict(s: SectionResult, us: dict, uc: dict | None, u_radial_mm: floa
     return out
 
 
-def _truth_rows(truth, sections: list[SectionResult]) -> tuple[dict, list]:
+def _truth_rows(truth, sections: list[SectionResult],
+                filter_upr: float | None = None) -> tuple[dict, list]:
     from lts360.inspect.truth import load_truth, true_section_xy
 
     obj, _ = truth if isinstance(truth, tuple) else load_truth(truth)
@@ -100,7 +127,7 @@ def _truth_rows(truth, sections: list[SectionResult]) -> tuple[dict, list]:
         if xy is None or len(xy) < MIN_POINTS:
             rows.append(None)
             continue
-        t = analyse_section(xy, index=s.index, z_mm=s.z_mm)
+        t = analyse_section(xy, index=s.index, z_mm=s.z_mm, filter_upr=filter_upr)
         rows.append({"centre_x_mm": float(t.ls.centre_mm[0]),
                      "centre_y_mm": float(t.ls.centre_mm[1]), "d_ls_mm": t.ls.diameter_mm,
                      "d_mean_mm": t.diameters.d_mean_mm, "d_min_mm": t.diameters.d_min_mm,
@@ -116,7 +143,9 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
                   lump_threshold_mm: float = scan_mod.DEFAULT_LUMP_MM,
                   n_draws: int = DEFAULT_DRAWS, seed: int = 0, u_radial_mm: float = 0.0,
                   bin_deg: float = DEFAULT_BIN_DEG, gap_deg: float = DEFAULT_GAP_DEG,
-                  filter_upr: float | None = None, source: str = "") -> Inspection:
+                  filter_upr: float | None = None, use_filter: bool = True,
+                  extreme_draws: int = DEFAULT_EXTREME_DRAWS, diameter_tol=None,
+                  ovality_max_mm: float | None = None, source: str = "") -> Inspection:
     """Inspect every section of ``cloud``.
 
     Parameters
@@ -134,6 +163,18 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         Type-B standard uncertainty of a radial offset common to a section (the rig's error
         budget or a reference measurement's bias): 2u on every diameter, u on a deviation,
         nothing on centre, ovality, roundness or harmonics, where it cancels.
+    filter_upr : float, [1, 1000], optional
+        Cut-off of the ISO 12181-2 Gaussian filter applied before the reference circles and
+        diameters; default: the standard's default for the scan's median LS diameter
+        (:func:`lts360.inspect.extremes.default_upr`).
+    use_filter : bool
+        False: no filter (``--filter none``).
+    extreme_draws : int, >= 2
+        Noise draws of each section's extremes' Monte Carlo (:mod:`lts360.inspect.extremes`).
+    diameter_tol : DiameterTolerance, optional
+    ovality_max_mm : float, > 0, optional
+        Size and ovality limits (:mod:`lts360.inspect.tolerances`); with them, or with
+        ``band``, ``data["verdict"]`` holds the scan's PASS/FAIL.
 
     Raises
     ------
@@ -146,10 +187,27 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         raise ValueError(f"--filter-upr: must be in [1, 1000], got {filter_upr}")
     if band is not None and nominal is None:
         raise ValueError("--tolerance-mm/--upper-mm/--lower-mm need --nominal")
+    if not use_filter and filter_upr is not None:
+        raise ValueError("--filter-upr: give it or --filter none, not both")
     ok = valid_mask(cloud.points_mm, cloud.quality)
     if not ok.any():
         raise NoValidPoints(f"the cloud {source or ''} has no valid point ({len(cloud)} samples, "
                             "none finite with quality FOUND or SATURATED)".replace("  ", " "))
+    # the default filter from the scan's median LS diameter (of the points, unfiltered)
+    form_upr = default_upr(float(np.median([
+        least_squares_circle(cloud.points_mm[(cloud.section == k) & ok, :2]).diameter_mm
+        for k in np.unique(cloud.section)
+        if ((cloud.section == k) & ok).sum() >= MIN_POINTS] or [np.nan]))) \
+        if any(((cloud.section == k) & ok).sum() >= MIN_POINTS
+               for k in np.unique(cloud.section)) else None
+    if use_filter and filter_upr is None:
+        filter_upr = form_upr
+        filter_note = (f"ISO 12181-2 Gaussian, {filter_upr:g} UPR (the standard's default for "
+                       "the scan's diameter)")
+    elif use_filter:
+        filter_note = f"ISO 12181-2 Gaussian, {filter_upr:g} UPR (--filter-upr)"
+    else:
+        filter_upr, filter_note = None, "none (--filter none)"
     sections, skipped, xy_list, view_list, times = [], [], [], [], []
     for k in np.unique(cloud.section):
         m = cloud.section == k
@@ -176,14 +234,31 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         u_cal = calibration_u(xy_list, view_list, calibration, n_draws=n_draws, seed=seed)
         cal_note = (f"Monte Carlo over {n_draws} calibration draws (seed {seed})"
                     if u_cal is not None else "the calibration carries no covariance: 0")
-    rows = []
+    rows, exs = [], []
+    picks = np.unique(np.round(np.linspace(0, len(sections) - 1,
+                                           min(CIRCLE_SECTIONS, len(sections)))).astype(int))
     for i, s in enumerate(sections):
         raw = s.extra.get("raw_profile", s.profile)  # unfiltered
         u_mean, tau, s_bin = correlated_mean_u(raw.theta_rad, raw.r_mm, s.ls.radius_mm,
                                                bin_deg=bin_deg)
         us = scatter_u(s.scatter_mm, s.n_valid, s.points_per_bin, u_mean_radius_mm=u_mean,
                        u_bin_mm=s_bin)
-        row = _section_dict(s, us, None if u_cal is None else u_cal[i], u_radial_mm)
+        bin_u = max(s.scatter_mm / np.sqrt(max(s.points_per_bin, 1.0)),
+                    s_bin if np.isfinite(s_bin) else 0.0)
+        rho = (tau - 1) / (tau + 1) if np.isfinite(tau) else 0.0
+        ex = extreme_noise(raw, upr=filter_upr, s_bin_mm=bin_u, rho=rho,
+                           form_upr=form_upr or 150.0, n_draws=extreme_draws,
+                           rng=np.random.SeedSequence([seed, int(s.index)]), gap_deg=gap_deg,
+                           circles=i in picks)
+        exs.append((ex, us, tau))
+    for i, (ex, _, _) in enumerate(exs):  # the MCCI's and MICI's from the nearest section fitted
+        j = int(picks[np.argmin(np.abs(picks - i))])
+        for k in ("ront_MCCI_mm", "ront_MICI_mm"):
+            ex.bias_mm[k], ex.u_mm[k] = exs[j][0].bias_mm[k], exs[j][0].u_mm[k]
+    for i, (s, (ex, us, tau)) in enumerate(zip(sections, exs)):
+        row = _section_dict(s, us, None if u_cal is None else u_cal[i], u_radial_mm, ex)
+        row["extreme_noise"] = {"s_bin_mm": ex.s_bin_mm, "rho": ex.rho, "n_draws": ex.n_draws,
+                                "bias_mm": ex.bias_mm, "u_mm": ex.u_mm}
         row["correlation_bins"] = tau if np.isfinite(tau) else None
         if times[i] is not None:
             row["time_s"], row["time_span_s"] = times[i]
@@ -218,21 +293,58 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         if band is not None:
             nom_out.update({"upper_mm": band.upper_mm, "lower_mm": band.lower_mm,
                             "pass": bool(all_pass)})
+    tol_out = None
+    if diameter_tol is not None or ovality_max_mm is not None:
+        from lts360.inspect.tolerances import section_checks
+
+        for row in rows:
+            row["checks"] = section_checks(row, diameter=diameter_tol,
+                                           ovality_max_mm=ovality_max_mm)
+        tol_out = {"diameter_mm": None if diameter_tol is None else
+                   {"nominal_mm": diameter_tol.nominal_mm, "tol_mm": diameter_tol.tol_mm,
+                    "lower_mm": diameter_tol.lower_mm, "upper_mm": diameter_tol.upper_mm},
+                   "ovality_max_mm": ovality_max_mm,
+                   "rule": "pass: the measured values within the limits; conformance by "
+                           "ISO 14253-1 with U(k = 2)"}
+    verdict = None
+    if tol_out is not None or (nom_out is not None and "pass" in nom_out):
+        failed = []
+        if nom_out is not None and "pass" in nom_out and not nom_out["pass"]:
+            failed.append("profile zone")
+        for row in rows:
+            for name, c in row.get("checks", {}).items():
+                if not c["pass"]:
+                    failed.append(f"{name} at z = {row['z_mm']:.2f} mm")
+        verdict = {"pass": not failed, "failed": failed}
     truth_out = None
     if truth is not None:
-        truth_out, trows = _truth_rows(truth, sections)
+        truth_out, trows = _truth_rows(truth, sections, filter_upr)
         for row, t in zip(rows, trows):
             row["truth"] = t
+    import time
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        tool_version = version("lts360")
+    except PackageNotFoundError:  # run from a source tree
+        tool_version = "0+unknown"
     inspection.data = {
+        "tool": {"name": "lts360", "version": tool_version},
+        "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "source": source, "n_sections": len(sections), "sections_skipped": skipped,
         "units": "lengths in mm, angles in deg; {value, u, U_k2}: U_k2 = 2u",
         "settings": {"bin_deg": bin_deg, "gap_deg": gap_deg, "filter_upr": filter_upr,
+                     "filter": filter_note,
+                     "extremes": f"D min, D max, ovality, RONt: U(k = 2) = 2u + |bias|, the "
+                                 f"noise bias of the extremes from a Monte Carlo of "
+                                 f"{extreme_draws} draws of each section's own noise, not "
+                                 f"corrected",
                      "lump_threshold_mm": lump_threshold_mm,
                      "reference_circles": list(REFERENCES),
                      "calibration_uncertainty": cal_note,
                      "u_radial_mm": u_radial_mm},
         "sections": rows, "scan": _scan(sections, rows, lump_threshold_mm),
-        "nominal": nom_out, "truth": truth_out}
+        "nominal": nom_out, "tolerances": tol_out, "verdict": verdict, "truth": truth_out}
     return inspection
 
 
@@ -258,9 +370,15 @@ def _scan(sections: list[SectionResult], rows: list[dict], lump_mm: float) -> di
            "trends": {k: scan_mod.trend(z, val(k)) for k in
                       ("d_ls_mm", "d_min_mm", "d_max_mm", "ovality_mm", "centre_x_mm",
                        "centre_y_mm")},
-           "events": [e.__dict__ for e in scan_mod.lumps_and_necks(
-               z, val("d_min_mm"), val("d_max_mm"), threshold_mm=lump_mm,
-               indices=[s.index for s in sections])]}
+           }
+    un = [r.get("extreme_noise", {}).get("u_mm", {}) for r in rows]
+    ev = scan_mod.lumps_and_necks(
+        z, val("d_min_mm"), val("d_max_mm"), threshold_mm=lump_mm,
+        indices=[s.index for s in sections],
+        u_d_min_mm=[x.get("d_min_mm", np.nan) for x in un] if all(un) else None,
+        u_d_max_mm=[x.get("d_max_mm", np.nan) for x in un] if all(un) else None)
+    out["events"] = [e.__dict__ for e in ev if e.significant]
+    out["events_not_significant"] = [e.__dict__ for e in ev if not e.significant]
     if all("time_s" in r for r in rows):  # a moving object: when each event passed the laser
         t = np.array([r["time_s"] for r in rows])
         order = np.argsort(z)
@@ -269,10 +387,19 @@ def _scan(sections: list[SectionResult], rows: list[dict], lump_mm: float) -> di
             e["time_s"] = float(np.interp(e["z_extreme_mm"], z[order], t[order]))
     if len(sections) >= 2 and np.ptp(z) > 0:
         ax = scan_mod.fit_axis(z, [s.ls.centre_mm for s in sections])
+        u_c = float(np.median([np.hypot(r["centre_x_mm"]["u"], r["centre_y_mm"]["u"])
+                               / np.sqrt(2) for r in rows]))
+        tu = scan_mod.tilt_uncertainty(z, ax, u_c)
         out["axis"] = {"x0_mm": ax.x0_mm, "y0_mm": ax.y0_mm, "slope_x": ax.slope_x,
-                       "slope_y": ax.slope_y, "tilt_deg": ax.tilt_deg,
-                       "tilt_azimuth_deg": ax.tilt_azimuth_deg,
+                       "slope_y": ax.slope_y,
+                       "tilt_deg": None if tu["too_short"] else ax.tilt_deg,
+                       "U_tilt_deg": tu["U_tilt_deg"],
+                       "tilt_azimuth_deg": None if tu["too_short"] else ax.tilt_azimuth_deg,
                        "straightness_mm": ax.straightness_mm}
+        if tu["too_short"]:
+            out["axis"]["note"] = (f"too short to tell: the tilt's U(k = 2) is "
+                                   f"{tu['U_tilt_deg']:.3f}° > {scan_mod.TILT_TELL_DEG}° "
+                                   f"(the centres give {ax.tilt_deg:.3f}°)")
         out["cylindricity"] = scan_mod.cylindricity(z, [s.profile.xy_mm for s in sections],
                                                     start=ax)
         out["diameter_spectrum"] = scan_mod.diameter_spectrum(z, val("d_ls_mm"))

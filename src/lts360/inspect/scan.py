@@ -9,15 +9,31 @@ stage position ``z_mm``.
   diameter exceeds (falls below) the scan's median of it by more than ``threshold_mm``; each
   with its start and end z, its length (number of sections × pitch), the z of its extreme and
   the extreme deviation.  A local bump or dent changes Dmax or Dmin long before it moves the
-  LS diameter.
+  LS diameter.  Given each section's noise u of Dmax and Dmin, an event must also be
+  significant: its deviation beyond its own U(k = 2) (``u² = u_section² + u_median²``,
+  ``u_median = 1.2533 · u_scan / √n``; the noise bias and the calibration are common to
+  every section and cancel).  ``u_section`` is the larger of the section's u and the scan's
+  own spread of the deviations ``u_scan = 1.4826 · MAD`` (robust: a few sections with an
+  event leave it alone; on a smooth pipe it is the section-to-section noise the model may
+  miss).  Each event reports its confidence, the probability that the true
+  deviation exceeds the threshold (normal, ``Φ((|dev| − threshold) / u)``).  Runs beyond the
+  threshold but within their U are returned apart, as not significant.
 * **Axis**: the line ``x = x₀ + aₓ z``, ``y = y₀ + a_y z`` fitted to the LS centres; tilt is its
   angle to the stage's z.  **Straightness** (ISO 12780's median line, about the LS axis): the
   diameter of the smallest cylinder coaxial with the LS axis that holds every centre.
-* **Cylindricity** (ISO 12180, LS reference): the least-squares cylinder (axis and radius)
-  fitted to the binned profiles of every section; CYLt is the peak-to-valley of the radial
-  deviations about it.  Meaningful where the object is nominally a cylinder.
+  The tilt carries its U(k = 2) from the centres' u (or their scatter about the line, the
+  larger); when that U exceeds :data:`TILT_TELL_DEG` the scan is too short to tell the axis'
+  direction and says so instead of a number.
+* **Cylindricity** (ISO 12180, LS reference): the cylinder about the axis through the section
+  centres, its radius the mean distance of the binned profiles from that axis; CYLt is the
+  peak-to-valley of the radial deviations about it.  The axis is not fitted freely to the
+  points: over a short scan of an oval tube a free LS cylinder tilts until the oblique cut of
+  the cylinder mimics the ovality (a tilt φ makes an ellipse of Dmax − Dmin ≈ D φ²/2; seen on a
+  4 mm scan of the PVC pipe: 5.3° where the centres tilt 0.055°).  Meaningful where the object
+  is nominally a cylinder.
 * **Spectrum**: the amplitude spectrum of the detrended LS diameter over z (uniform pitch; an
-  uneven one is resampled), wavelength in mm.
+  uneven one is resampled), wavelength in mm; the dominant wavelength only among those that
+  fit at least twice in the scan's length (``n`` sections × pitch).
 """
 
 from __future__ import annotations
@@ -27,10 +43,15 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["Event", "AxisFit", "trend", "lumps_and_necks", "fit_axis", "cylindricity",
-           "diameter_spectrum", "DEFAULT_LUMP_MM"]
+           "tilt_uncertainty", "diameter_spectrum", "DEFAULT_LUMP_MM", "TILT_TELL_DEG",
+           "MIN_PERIODS"]
 
 #: Default threshold of a lump or neck-down (mm): 50 µm, a cable gauge's usual setting.
 DEFAULT_LUMP_MM = 0.05
+#: A tilt whose U(k = 2) exceeds this (deg) is "too short to tell".
+TILT_TELL_DEG = 0.05
+#: Periods a wavelength must fit in the scan to be named dominant.
+MIN_PERIODS = 2
 
 
 def trend(z_mm, values) -> dict:
@@ -59,6 +80,10 @@ class Event:
     z_extreme_mm: float
     deviation_mm: float
     sections: list
+    u_mm: float | None = None
+    U_k2_mm: float | None = None
+    confidence: float | None = None
+    significant: bool = True
 
 
 def _pitch(z: np.ndarray) -> float:
@@ -74,9 +99,13 @@ def _runs(mask: np.ndarray) -> list[np.ndarray]:
 
 
 def lumps_and_necks(z_mm, d_min_mm, d_max_mm, *, threshold_mm: float = DEFAULT_LUMP_MM,
-                    indices=None) -> list[Event]:
+                    indices=None, u_d_min_mm=None, u_d_max_mm=None) -> list[Event]:
     """Lumps (Dmax above its median by more than ``threshold_mm``) and neck-downs (Dmin below
-    its median by more than it), as runs of consecutive sections in z order."""
+    its median by more than it), as runs of consecutive sections in z order.
+
+    With ``u_d_min_mm``, ``u_d_max_mm`` (each section's noise u) every event carries its u,
+    U(k = 2) and confidence, and ``significant`` is False when its deviation lies within its U
+    (module docstring); without them every event counts as significant."""
     if not threshold_mm > 0:
         raise ValueError(f"threshold_mm must be > 0, got {threshold_mm}")
     z = np.asarray(z_mm, float)
@@ -85,16 +114,30 @@ def lumps_and_necks(z_mm, d_min_mm, d_max_mm, *, threshold_mm: float = DEFAULT_L
     ids = (np.arange(len(z)) if indices is None else np.asarray(indices))[order]
     pitch = _pitch(z)
     out = []
-    for kind, v, sign in (("lump", np.asarray(d_max_mm, float)[order], 1.0),
-                          ("neck-down", np.asarray(d_min_mm, float)[order], -1.0)):
+    from scipy.stats import norm
+
+    for kind, v, sign, u in (("lump", np.asarray(d_max_mm, float)[order], 1.0, u_d_max_mm),
+                             ("neck-down", np.asarray(d_min_mm, float)[order], -1.0,
+                              u_d_min_mm)):
         if not np.isfinite(v).any():
             continue
         dev = sign * (v - np.nanmedian(v))
+        if u is not None:
+            u_scan = 1.4826 * float(np.nanmedian(np.abs(dev)))
+            u = np.maximum(np.asarray(u, float)[order], u_scan)
+            u_med = 1.2533 * float(np.nanmedian(u)) / np.sqrt(np.isfinite(v).sum())
         for run in _runs(np.nan_to_num(dev, nan=-np.inf) > threshold_mm):
             k = run[np.argmax(dev[run])]
+            extra = {}
+            if u is not None:
+                ue = float(np.hypot(u[k], u_med))
+                extra = {"u_mm": ue, "U_k2_mm": 2 * ue,
+                         "confidence": float(norm.cdf((dev[k] - threshold_mm) / ue))
+                         if ue > 0 else 1.0,
+                         "significant": bool(dev[k] > 2 * ue)}
             out.append(Event(kind, float(z[run[0]]), float(z[run[-1]]),
                              float(z[run[-1]] - z[run[0]] + pitch), float(z[k]),
-                             float(sign * dev[k]), [int(i) for i in ids[run]]))
+                             float(sign * dev[k]), [int(i) for i in ids[run]], **extra))
     return sorted(out, key=lambda e: e.z_start_mm)
 
 
@@ -128,40 +171,47 @@ def fit_axis(z_mm, centres_mm) -> AxisFit:
                    float(np.degrees(np.arctan2(ay, ax))), float(2.0 * d.max()), d)
 
 
-def cylindricity(z_mm, profiles_xy_mm, *, start: AxisFit | None = None,
-                 max_points: int = 20000) -> dict:
-    """LS cylinder through the profiles (a list of (m_i, 2) arrays at ``z_mm``).
+def cylindricity(z_mm, profiles_xy_mm, *, start: AxisFit | None = None) -> dict:
+    """The cylinder about the axis through the section centres (module docstring), for the
+    profiles (a list of (m_i, 2) arrays at ``z_mm``).
 
-    The fit uses at most ``max_points`` points (every k-th of each profile); CYLt is taken over
-    all of them.
+    Parameters
+    ----------
+    start : AxisFit, optional
+        That axis (default: the LS line through the profiles' mean points).
 
     Returns the cylinder's radius, its axis (point at z = 0 and direction) and CYLt, the
     peak-to-valley of the radial deviations about it (mm).
     """
-    from scipy.optimize import least_squares
-
     all_pts = np.vstack([np.column_stack([p, np.full(len(p), z)])
                          for z, p in zip(z_mm, profiles_xy_mm)])
-    pts = all_pts[::max(1, -(-len(all_pts) // max_points))]
     if start is None:
         start = fit_axis(z_mm, [p.mean(axis=0) for p in profiles_xy_mm])
-    r0 = float(np.mean(np.hypot(pts[:, 0] - start.x0_mm - start.slope_x * pts[:, 2],
-                                pts[:, 1] - start.y0_mm - start.slope_y * pts[:, 2])))
-
-    def residual(p, pts=pts):
-        x0, y0, ax, ay, r = p
-        d = np.array([ax, ay, 1.0]) / np.sqrt(1.0 + ax * ax + ay * ay)
-        q = pts - np.array([x0, y0, 0.0])
-        perp = q - np.outer(q @ d, d)
-        return np.hypot(np.hypot(perp[:, 0], perp[:, 1]), perp[:, 2]) - r
-
-    sol = least_squares(residual, [start.x0_mm, start.y0_mm, start.slope_x, start.slope_y, r0],
-                        method="lm", xtol=1e-12, ftol=1e-12)
-    res = residual(sol.x, all_pts)
-    x0, y0, ax, ay, r = sol.x
+    x0, y0, ax, ay = start.x0_mm, start.y0_mm, start.slope_x, start.slope_y
+    d = np.array([ax, ay, 1.0]) / np.sqrt(1.0 + ax * ax + ay * ay)
+    q = all_pts - np.array([x0, y0, 0.0])
+    perp = q - np.outer(q @ d, d)
+    dist = np.linalg.norm(perp, axis=1)
+    r = float(dist.mean())
+    res = dist - r
     return {"radius_mm": float(r), "diameter_mm": float(2 * r), "axis_x0_mm": float(x0),
             "axis_y0_mm": float(y0), "axis_slope_x": float(ax), "axis_slope_y": float(ay),
+            "axis": "the LS line through the section centres",
             "cylt_mm": float(res.max() - res.min()), "rms_mm": float(np.sqrt(np.mean(res**2)))}
+
+
+def tilt_uncertainty(z_mm, axis: AxisFit, u_centre_mm: float) -> dict:
+    """``{u_tilt_deg, U_tilt_deg, too_short}`` of the axis through centres at ``z_mm`` with a
+    standard uncertainty ``u_centre_mm`` each (the larger of it and the centres' scatter about
+    the line when there are three or more)."""
+    z = np.asarray(z_mm, float)
+    n = len(z)
+    s = float(u_centre_mm)
+    if n > 2:
+        s = max(s, float(np.sqrt(np.sum(axis.residuals_mm ** 2) / (n - 2) / 2)))
+    sxx = float(np.sum((z - z.mean()) ** 2))
+    u = float(np.degrees(s / np.sqrt(sxx))) if sxx > 0 else float("inf")
+    return {"u_tilt_deg": u, "U_tilt_deg": 2 * u, "too_short": bool(not 2 * u <= TILT_TELL_DEG)}
 
 
 def diameter_spectrum(z_mm, d_mm) -> dict:
@@ -189,7 +239,13 @@ def diameter_spectrum(z_mm, d_mm) -> dict:
     amp, freq = amp[1:], freq[1:]
     if n % 2 == 0 and amp.size:
         amp[-1] /= 2.0
-    k = int(np.argmax(amp)) if amp.size else None
-    return {"wavelength_mm": (1.0 / freq).tolist(), "amplitude_mm": amp.tolist(),
-            "dominant_wavelength_mm": None if k is None else float(1.0 / freq[k]),
-            "dominant_amplitude_mm": None if k is None else float(amp[k])}
+    length = n * pitch
+    fits = (1.0 / np.maximum(freq, 1e-300)) * MIN_PERIODS <= length + 1e-9 * pitch
+    k = int(np.flatnonzero(fits)[np.argmax(amp[fits])]) if fits.any() else None
+    out = {"wavelength_mm": (1.0 / freq).tolist(), "amplitude_mm": amp.tolist(),
+           "dominant_wavelength_mm": None if k is None else float(1.0 / freq[k]),
+           "dominant_amplitude_mm": None if k is None else float(amp[k])}
+    if k is None:
+        out["note"] = (f"too short to tell: no wavelength fits {MIN_PERIODS} times in the "
+                       f"scan's {length:g} mm")
+    return out

@@ -1,0 +1,82 @@
+"""Inspection under realistic noise, against the truth (STUDIES.md, "Inspection under noise").
+
+Usage::
+
+    python scripts/inspect_noise_study.py ROOT [--filter-upr N | --filter none]
+
+``ROOT`` holds one folder per scan, each with ``scan/`` (``lts360 render --sections N --noise
+realistic``) and ``cloud.ply`` (``lts360 measure scan --calibration
+scan/section_0000/frame.json``).  Each cloud is inspected with ``--truth scan``; printed: per
+scan and quantity (D min, D max, ovality, RONt against each circle) how many sections lie within
+their U(k = 2) of the truth, the events (lumps / neck-downs) found, the axis' tilt against the
+true one (0: the renders stand upright) and the dominant wavelength.  ``ROOT/summary.json``
+holds every number.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from lts360.cli import main
+
+KEYS = ("d_min_mm", "d_max_mm", "ovality_mm")
+REFS = ("LSCI", "MZCI", "MCCI", "MICI")
+
+
+def study(root: Path, extra: list[str]) -> dict:
+    out = {}
+    for d in sorted(p for p in root.iterdir() if (p / "cloud.ply").is_file()):
+        rep = d / ("report" + "".join(extra).replace("-", "_"))
+        rc = main(["inspect", str(d / "cloud.ply"), "--truth", str(d / "scan"), "--out",
+                   str(rep), *extra])
+        data = json.loads((rep / "inspection.json").read_text())
+        rows = []
+        for s in data["sections"]:
+            t = s["truth"]
+            r = {"z_mm": s["z_mm"]}
+            for k in KEYS:
+                r[k] = (s[k]["value"] - t[k], s[k]["U_k2"])
+            for ref in REFS:
+                r["ront_" + ref] = (s["ront_mm"][ref]["value"] - t["ront_mm"][ref],
+                                    s["ront_mm"][ref]["U_k2"])
+            rows.append(r)
+        scan = data["scan"]
+        out[d.name] = {"exit": rc, "filter": data["settings"].get("filter", "none"), "sections": rows,
+                       "events": scan["events"],
+                       "events_not_significant": scan.get("events_not_significant", []),
+                       "axis": scan.get("axis"), "cylinder": scan.get("cylindricity"),
+                       "spectrum": {k: v for k, v in scan.get("diameter_spectrum", {}).items()
+                                    if k not in ("wavelength_mm", "amplitude_mm")}}
+    return out
+
+
+def summarise(res: dict) -> None:
+    total = inside = 0
+    for name, r in res.items():
+        cols = [c for c in r["sections"][0] if c != "z_mm"]
+        cells = []
+        for c in cols:
+            ok = sum(abs(e) <= U for e, U in (s[c] for s in r["sections"]))
+            worst = max(r["sections"], key=lambda s: abs(s[c][0]) - s[c][1])[c]
+            cells.append(f"{c} {ok}/{len(r['sections'])} (worst {1e3 * worst[0]:+.0f}/"
+                         f"{1e3 * worst[1]:.0f} µm)")
+            total += len(r["sections"])
+            inside += ok
+        ax = r["axis"] or {}
+        print(f"{name}: {r['filter']}")
+        print("   " + "; ".join(cells))
+        print(f"   events {[(e['kind'], round(e['z_extreme_mm'], 2), round(1e3 * e['deviation_mm'], 1), round(e['confidence'] or 0, 3)) for e in r['events']]}"
+              f" not significant {len(r['events_not_significant'])}; tilt "
+              f"{ax.get('tilt_deg')} (U {ax.get('U_tilt_deg')}) {ax.get('note', '')}; "
+              f"dominant wavelength {r['spectrum'].get('dominant_wavelength_mm')} "
+              f"{r['spectrum'].get('note', '')}")
+    print(f"all: {inside}/{total} values within U(k = 2) ({100 * inside / max(total, 1):.1f} %)")
+
+
+if __name__ == "__main__":
+    root = Path(sys.argv[1])
+    res = study(root, sys.argv[2:])
+    (root / "summary.json").write_text(json.dumps(res, indent=1, default=float))
+    summarise(res)

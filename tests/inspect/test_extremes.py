@@ -1,0 +1,100 @@
+"""The ISO 12181-2 filter against its transfer function, its default cut-off, and extremes of
+noisy sections within their own U (the noise bias carried in U)."""
+
+import numpy as np
+import pytest
+
+from lts360.inspect.extremes import (default_upr, extreme_quantities, filter_grid,
+                                     gaussian_transfer)
+from lts360.inspect.profile import bin_profile, gaussian_filter
+from lts360.inspect.run import inspect_cloud
+
+from _profiles import noisy_section_cloud, polar
+
+ORDERS = (2, 5, 30, 80, 150, 200, 300)
+
+
+@pytest.mark.parametrize("upr", [50.0, 150.0])
+def test_the_filter_keeps_and_loses_harmonics_as_its_transfer_function_says(upr):
+    """r = R + Σ a cos kθ: after the filter each order keeps exp(−π (α k / upr)²) of its
+    amplitude (50 % at the cut-off), below and above it."""
+    a = 0.01
+    xy = polar(lambda t: 10.0 + sum(a * np.cos(k * t) for k in ORDERS), step_deg=0.5)
+    prof = bin_profile(xy, (0.0, 0.0))
+    out = gaussian_filter(prof, upr)
+    assert len(out.r_mm) == 720
+    amp = 2 * np.abs(np.fft.rfft(out.r_mm)) / 720  # the uniform grid from −π: |DFT| is A_k
+    want = a * np.exp(-np.pi * (np.sqrt(np.log(2) / np.pi) * np.array(ORDERS) / upr) ** 2)
+    # float64 FFT round trip on 720 bins: far below 1e-9 mm
+    assert amp[list(ORDERS)] == pytest.approx(want, abs=1e-9)
+    assert gaussian_transfer(720, upr)[int(upr)] == pytest.approx(0.5)
+    assert filter_grid(prof.r_mm, upr) == pytest.approx(out.r_mm, abs=1e-12)  # one filter
+
+
+def test_the_default_cut_off_follows_the_diameter():
+    assert [default_upr(d) for d in (6, 8, 20, 25, 32, 80, 100, 300)] == \
+        [15, 15, 50, 50, 150, 150, 500, 1500]
+    with pytest.raises(ValueError, match="diameter_mm"):
+        default_upr(0.0)
+
+
+def test_extreme_quantities_of_an_ellipse():
+    th = -np.pi + 2 * np.pi * np.arange(720) / 720
+    r = 10.0 + 0.05 * np.cos(2 * th)
+    q = extreme_quantities(r[None, :])
+    assert q["d_max_mm"][0] == pytest.approx(20.1) and q["d_min_mm"][0] == pytest.approx(19.9)
+    assert q["ovality_mm"][0] == pytest.approx(0.2) and q["ront_LSCI_mm"][0] == pytest.approx(0.1)
+
+
+def _errors(noise_mm, rho, seeds, **kw):
+    truth = None
+    rows = []
+    for seed in seeds:
+        c, t = noisy_section_cloud(seed, noise_mm=noise_mm, rho=rho)
+        if truth is None:
+            truth = inspect_cloud(t, **kw).data["sections"][0]
+        s = inspect_cloud(c, seed=seed, **kw).data["sections"][0]
+        for k in ("d_min_mm", "d_max_mm", "ovality_mm"):
+            rows.append((k, s[k]["value"] - truth[k]["value"], s[k]["U_k2"], s[k]["bias_mm"]))
+        for ref in ("LSCI", "MZCI", "MCCI", "MICI"):
+            q = s["ront_mm"][ref]
+            rows.append((ref, q["value"] - truth["ront_mm"][ref]["value"], q["U_k2"],
+                         q["bias_mm"]))
+    return rows
+
+
+def test_noisy_extremes_lie_within_their_u():
+    """Six seeded noisy sections (20 µm white noise per point, 5 points per bin, 150 UPR): D
+    min, D max, ovality and RONt against the four circles within their U; the noise pushes
+    them outwards, and the bias the Monte Carlo finds from each section's own noise is that
+    push (measured: D max +6 µm mean error, bias +13 µm; ovality +14, +21; RONt LS +13, +16)."""
+    rows = _errors(0.02, 0.0, range(6))
+    inside = [abs(e) <= U for _, e, U, _ in rows]
+    assert np.mean(inside) >= 0.95, rows  # 42 values: at most 2 outside
+    for k, sign in (("d_min_mm", -1), ("d_max_mm", 1), ("ovality_mm", 1), ("LSCI", 1)):
+        e = np.array([x[1] for x in rows if x[0] == k])
+        b = np.array([x[3] for x in rows if x[0] == k])
+        assert np.all(sign * e > 0) and np.all(sign * b > 0), k  # outwards, every draw
+        # the mean of 6 errors (their sd ~4 µm) and of 6 bias estimates: within 10 µm, a
+        # third of their U(k = 2)
+        assert abs(e.mean() - b.mean()) < 0.010, k
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("noise_mm,rho,kw", [
+    (0.02, 0.0, {}),
+    pytest.param(0.03, 0.8, {}, marks=pytest.mark.xfail(strict=True, reason=(
+        "not met yet, measured 2026-12-04: 198 of 210 (94.3 %) within U; under strongly "
+        "correlated noise at 150 UPR the MICI's noise bias is under-estimated (mean error "
+        "+124 µm, bias +47 µm; 24 of 30 within U), RONt LS/MZ 28 and 27 of 30"))),
+    (0.02, 0.0, {"use_filter": False}),
+    (0.03, 0.8, {"filter_upr": 50.0})])
+def test_noisy_extremes_lie_within_their_u_over_many_draws(noise_mm, rho, kw):
+    """30 seeded draws × 7 quantities: ≥ 95 % within U(k = 2) pooled, ≥ 85 % for each (30
+    draws: one quantity's 95 % coverage reads ≥ 85 % with 99 % probability)."""
+    rows = _errors(noise_mm, rho, range(100, 130), **kw)
+    inside = np.array([abs(e) <= U for _, e, U, _ in rows])
+    assert inside.mean() >= 0.95
+    names = np.array([k for k, *_ in rows])
+    for k in np.unique(names):
+        assert inside[names == k].mean() >= 0.85, k
