@@ -319,8 +319,8 @@ def _twin_u_mm(cloud_path) -> float | None:
 
 def _twin_corrector(args, cal):
     """The ``--bias-model twin`` hook, or a usage error naming what is wrong."""
-    from lts360.scenes.rig_io import load_rig
     from lts360.twin import TwinCorrector
+    from lts360.twin.rig import twin_design
 
     if args.method != "inverse":
         raise UsageError("--bias-model twin: needs the inverse method (the twin is measured "
@@ -330,7 +330,7 @@ def _twin_corrector(args, cal):
     if not 0 <= args.twin_axial_mm <= 10:
         raise UsageError(f"--twin-axial-mm: must be in [0, 10], got {args.twin_axial_mm}")
     try:
-        return TwinCorrector(cal, load_rig(args.twin_rig), material=args.twin_material,
+        return TwinCorrector(cal, twin_design(cal, args.twin_rig), material=args.twin_material,
                              spp=args.twin_spp, axial_reach_mm=args.twin_axial_mm)
     except (ValueError, KeyError, FileNotFoundError) as exc:
         raise UsageError(f"--bias-model twin: {exc}") from None

@@ -141,10 +141,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "rig with --twin-rig's optics, laser and sensor) with the same plan and "
                         "subtracting its error per view and θ; adds ~1-3 s per section "
                         "(default none)")
-    s.add_argument("--twin-rig", default="paper",
+    s.add_argument("--twin-rig", default=None,
                    help="rig file (preset or TOML) whose optics, laser, sensor and mirror "
                         "extents the twin uses; its geometry comes from --calibration "
-                        "(default paper)")
+                        "(default: the rig the calibration or frame records; an override must "
+                        "have the recorded rig's design geometry)")
     s.add_argument("--twin-material", default="ground-steel",
                    help="the twin's surface (see lts360 objects; default ground-steel, the plug "
                         "gauge's)")

@@ -3,7 +3,8 @@ plan, and subtract what the chain does to a profile whose radii are known exactl
 
 For each section: the measured points give a closed profile (:mod:`lts360.twin.profile`); its
 prism is rendered noise-free through the calibrated rig with the rig file's optics
-(:mod:`lts360.twin.rig`), only on the pixels the plan reads; the twin image is measured by the
+(:mod:`lts360.twin.rig`: the camera sees it through the calibrated mirrors, the laser lights
+it through them turned perpendicular to the calibrated sheet), only on the pixels the plan reads; the twin image is measured by the
 very function (same grid, windows, detector, compensation, rejection) that measured the real
 image.  Per view and θ the bias is ``b = r_twin_measured − r_twin_exact`` (the exact radius of
 the prism along the same ray), smoothed along θ over ``smooth_deg`` (the twin's render noise),
@@ -32,7 +33,7 @@ from lts360.recon.calibration.model import Calibration
 from lts360.scenes.materials import get_material
 from lts360.scenes.rig import Rig
 from lts360.twin.profile import axial_form, loft_mesh, ray_radii, section_profile
-from lts360.twin.rig import twin_rig
+from lts360.twin.rig import laser_side_mirrors, twin_rig
 
 __all__ = ["TwinCorrector", "TwinLog", "DEFAULT_TWIN_SPP", "DEFAULT_SMOOTH_DEG", "INPUT_U",
            "perturbed_design"]
@@ -57,7 +58,8 @@ TWIN_SEED = 0x7717
 @dataclass
 class TwinLog:
     """What the correction did, one entry per section: per view the mean bias removed (µm),
-    its spread along θ, the corrected and uncorrected point counts and ``u_render_um``."""
+    its spread along θ, the corrected and uncorrected point counts, ``u_render_um`` and the
+    correction itself (``theta_rad``, ``bias_mm``: per corrected point)."""
 
     sections: list = field(default_factory=list)
     render_s: float = 0.0
@@ -224,7 +226,8 @@ class TwinCorrector:
         mesh = (surface if hasattr(surface, "faces")
                 else loft_mesh(surface, half_length_mm=self.half_length_mm))
         spec = SceneSpec(rig, (("object", mesh,
-                                     material_to_bsdf(get_material(self.material))),))
+                                     material_to_bsdf(get_material(self.material))),),
+                         laser_mirrors=laser_side_mirrors(rig))
         res = render_radiance_pixels(spec, pixels_xy, spp=int(self.spp), seed=int(seed),
                                      scale=1.0, max_bounces=2, thin_lens=True, laser_on=True)
         image, _, _ = sensor_image(rig, res, noise="none",
@@ -329,7 +332,13 @@ class TwinCorrector:
             if tv is None:
                 views[name] = v
                 continue
-            exact = ray_radii(verts, tv.theta_rad, near_mm=tv.r_mm)
+            # A compensated measurement moved the twin's view by its §4.4 offset too: the
+            # twin is rendered through the very planes it is measured with, so the offset
+            # (which corrects those planes' errors in the real image) is no bias of its own.
+            off = (np.asarray(plan.cal.view_offsets_mm.get(name, np.zeros(2)), float)
+                   if getattr(twin, "compensated", False) and name != "direct"
+                   else np.zeros(2))
+            exact = ray_radii(verts + off, tv.theta_rad, near_mm=tv.r_mm)
             b = np.where(tv.valid, tv.r_mm - exact, np.nan)
             b_s, count = _nan_smooth(b, size, wrap)
             ok = v.valid & np.isfinite(b_s)
@@ -341,7 +350,9 @@ class TwinCorrector:
                 "mean_bias_um": float(1e3 * np.mean(b_s[ok])) if ok.any() else 0.0,
                 "bias_range_um": (float(1e3 * np.ptp(b_s[ok])) if ok.any() else 0.0),
                 "n_corrected": int(ok.sum()), "n_uncorrected": int((v.valid & ~ok).sum()),
-                "u_render_um": 1e3 * u if np.isfinite(u) else 0.0}
+                "u_render_um": 1e3 * u if np.isfinite(u) else 0.0,
+                # the correction itself, per corrected point: θ (rad) and the bias removed (mm)
+                "theta_rad": np.asarray(v.theta_rad)[ok], "bias_mm": b_s[ok]}
         return dataclasses.replace(result, views=views)
 
     def _view_bias_um(self, twin, verts) -> dict[str, float]:

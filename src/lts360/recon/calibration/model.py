@@ -151,6 +151,11 @@ class Calibration:
         ``"left-right"``).  Every mirror is present after construction (zeros by default).
     uncertainty : dict
         Free-form (JSON-serialisable) uncertainty information, e.g. covariances; not used yet.
+    optics : dict
+        The optics the calibration was made with, for the line-centre bias twin (recon does
+        not read it): ``rig`` (the preset name or rig file given) and ``rig_toml`` (that rig's
+        full TOML: design, lens, sheet, sensor).  Empty for a calibration that does not know
+        (an older file).
     """
 
     image_size: tuple[int, int]
@@ -161,6 +166,7 @@ class Calibration:
     T_cam_meas: np.ndarray
     view_offsets_mm: Mapping[str, np.ndarray] = field(default_factory=dict)
     uncertainty: dict = field(default_factory=dict)
+    optics: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         size = self.image_size
@@ -230,6 +236,14 @@ class Calibration:
             object.__setattr__(self, "uncertainty", {})
         if not isinstance(self.uncertainty, dict):
             raise ValueError("uncertainty: must be a dict")
+        if self.optics is None:
+            object.__setattr__(self, "optics", {})
+        if not isinstance(self.optics, dict):
+            raise ValueError("optics: must be a JSON object {rig, rig_toml}")
+        for key in ("rig", "rig_toml"):
+            if key in self.optics and not (isinstance(self.optics[key], str)
+                                           and self.optics[key]):
+                raise ValueError(f"optics.{key}: must be a non-empty string")
 
     # -- convenience -------------------------------------------------------------------------
     @property
@@ -329,6 +343,7 @@ def calibration_to_dict(cal: Calibration) -> dict:
         "T_cam_meas": cal.T_cam_meas.tolist(),
         "view_offsets_mm": {k: v.tolist() for k, v in cal.view_offsets_mm.items()},
         "uncertainty": cal.uncertainty,
+        "optics": cal.optics,
     }
 
 
@@ -360,9 +375,10 @@ def calibration_from_dict(data: Mapping) -> Calibration:
     T = _opencv_matrix(_require(data, "T_cam_meas"), "T_cam_meas")
     offsets = data.get("view_offsets_mm") or {}
     uncertainty = data.get("uncertainty") or {}
+    optics = data.get("optics") or {}  # absent in files older than the optics record
     return Calibration(image_size=(w, h), K=K, dist=dist, mirrors=tuple(mirrors),
                        laser_plane=laser_plane, T_cam_meas=T, view_offsets_mm=offsets,
-                       uncertainty=uncertainty)
+                       uncertainty=uncertainty, optics=optics)
 
 
 def shift_origin(cal: Calibration, xy_mm) -> Calibration:
@@ -420,9 +436,12 @@ def calibration_from_frame_truth(data: Mapping) -> Calibration:
         raise ValueError(f"laser.plane: the sheet must be roughly perpendicular to the world Z "
                          f"axis (the object axis), got n={n_l.tolist()}")
     T_world_meas = make_T_cam_meas((n_l, d_l), (0.0, 0.0, d_l / n_l[2]), (1.0, 0.0, 0.0))
+    rig = data.get("rig")  # the frame's rig (frames written before it was recorded: none)
+    optics = ({k: rig[k] for k in ("rig", "rig_toml") if isinstance(rig.get(k), str)}
+              if isinstance(rig, Mapping) else {})
     return Calibration(image_size=(int(size[0]), int(size[1])), K=K, dist=dist,
                        mirrors=tuple(mirrors), laser_plane=transform_plane(n_l, d_l, R, t),
-                       T_cam_meas=T_cam_world @ T_world_meas)
+                       T_cam_meas=T_cam_world @ T_world_meas, optics=optics)
 
 
 def load_calibration(path) -> Calibration:
