@@ -169,6 +169,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--radius-mm", type=float, default=10.0,
                    help="the reference's nominal radius (default 10)")
     s.add_argument("--band-mm", type=float, default=1.0, help="radial search band ± (default 1)")
+    s.add_argument("--master-diameter-mm", default=None, metavar="D[,D2]",
+                   help="mastering: the references' known diameters (one: per view a radial "
+                        "offset beside the offsets; two or more, ≥ 1 mm apart: also a scale; "
+                        "each shot is matched to its master); default: the paper's §4.4 only")
+    s.add_argument("--master-u-mm", default=None, metavar="U[,U2]",
+                   help="the masters' diameters' standard uncertainties (certificate; one per "
+                        "diameter, or one for all; default 0)")
     s.set_defaults(func=cmd_compensate)
 
     s = sub.add_parser("score", help="score a measured cloud against the truth of rendered frames")

@@ -113,6 +113,20 @@ def perturbed_design(design: Rig, key: str, u: float) -> Rig:
     raise ValueError(f"unknown twin input {key!r}; known: {', '.join(INPUT_U)}")
 
 
+def _compensated(verts_mm: np.ndarray, cal, name: str, compensate: bool) -> np.ndarray:
+    """The profile ``verts_mm`` (n, 2) as a compensated measurement of view ``name`` reads
+    it: radii ``scale·ρ + radial offset`` along the rays from the origin, then the view's
+    translation (:func:`lts360.recon.triangulation.inverse.compensation_of`)."""
+    from lts360.recon.triangulation.inverse import compensation_of
+
+    kw = compensation_of(cal, name, compensate)
+    if not kw:
+        return verts_mm
+    rho = np.hypot(*verts_mm.T)
+    out = verts_mm * ((kw["scale"] * rho + kw["radial_offset_mm"]) / rho)[:, None]
+    return out + kw.get("offset_mm", np.zeros(2))
+
+
 def _nan_smooth(values: np.ndarray, size: int, wrap: bool) -> tuple[np.ndarray, np.ndarray]:
     """Moving mean of the finite values over ``size`` samples; (mean, count) per sample."""
     from scipy.ndimage import uniform_filter1d
@@ -332,13 +346,12 @@ class TwinCorrector:
             if tv is None:
                 views[name] = v
                 continue
-            # A compensated measurement moved the twin's view by its §4.4 offset too: the
-            # twin is rendered through the very planes it is measured with, so the offset
-            # (which corrects those planes' errors in the real image) is no bias of its own.
-            off = (np.asarray(plan.cal.view_offsets_mm.get(name, np.zeros(2)), float)
-                   if getattr(twin, "compensated", False) and name != "direct"
-                   else np.zeros(2))
-            exact = ray_radii(verts + off, tv.theta_rad, near_mm=tv.r_mm)
+            # A compensated measurement moved the twin's view by its §4.4 offset (and its
+            # mastering) too: the twin is rendered through the very planes it is measured
+            # with, so what corrects those planes' errors in the real image is no bias of its.
+            exact = ray_radii(_compensated(verts, plan.cal, name,
+                                           getattr(twin, "compensated", False)),
+                              tv.theta_rad, near_mm=tv.r_mm)
             b = np.where(tv.valid, tv.r_mm - exact, np.nan)
             b_s, count = _nan_smooth(b, size, wrap)
             ok = v.valid & np.isfinite(b_s)

@@ -91,6 +91,10 @@ def joint_view_offsets(result, *, reference: str = "direct", min_points: int = 1
 #: Two masters closer than this in diameter (mm) do not set a scale (it is then the ratio of
 #: two radial offsets read 0.5 mm apart in radius: ill conditioned).
 MIN_MASTER_SPREAD_MM = 1.0
+#: Mastering drops points whose residual exceeds this many robust σ (1.4826·MAD), refitting
+#: up to :data:`OUTLIER_ROUNDS` times.
+OUTLIER_K = 4.0
+OUTLIER_ROUNDS = 5
 
 
 @dataclass(frozen=True, eq=False)
@@ -119,8 +123,10 @@ class MasterFit:
         The masters (distinct diameters) and their standard uncertainties.
     shots_per_master : tuple of int
     rms_mm : float
-        RMS of the fit's residuals.
+        RMS of the fit's residuals (outliers dropped).
     fitted_scale : bool
+    n_points, n_outliers : int
+        Points fitted, and dropped as outliers.
     """
 
     offsets_mm: dict
@@ -136,6 +142,8 @@ class MasterFit:
     shots_per_master: tuple
     rms_mm: float
     fitted_scale: bool
+    n_points: int = 0
+    n_outliers: int = 0
 
     def to_dict(self) -> dict:
         """The JSON record stored in ``calibration.json`` (``master``)."""
@@ -143,6 +151,7 @@ class MasterFit:
                 "u_diameters_mm": list(self.u_diameters_mm),
                 "shots_per_master": list(self.shots_per_master),
                 "fitted_scale": self.fitted_scale, "rms_um": 1e3 * self.rms_mm,
+                "n_points": self.n_points, "n_outliers": self.n_outliers,
                 "radial_offset_mm": dict(self.radial_offset_mm), "scale": dict(self.scale),
                 "u_radial_offset_mm": dict(self.u_radial_offset_mm),
                 "u_fit_radial_offset_mm": dict(self.u_fit_radial_offset_mm),
@@ -237,13 +246,16 @@ def master_fit(result, diameters_mm, *, u_diameters_mm=None, reference: str = "d
         ds = x[2 * m + 2 * no + nv:] if fit_scale else np.zeros(nv)
         return c, t, dr, ds
 
-    def make_residual(R):
+    keep = np.ones(r0.size, bool)
+
+    def make_residual(R, sel=None):
         def residual(x):
             c, t, dr, ds = unpack(x)
             rr = (1.0 + ds[vix]) * r0 + dr[vix]
             shift = np.where(tix[:, None] >= 0, t[np.maximum(tix, 0)], 0.0)
             q = rr[:, None] * u0 + shift - c[shot]
-            return np.hypot(*q.T) - R[shot]
+            res = np.hypot(*q.T) - R[shot]
+            return res if sel is None else res[sel]
         return residual
 
     R = 0.5 * D
@@ -253,10 +265,23 @@ def master_fit(result, diameters_mm, *, u_diameters_mm=None, reference: str = "d
                                   * nv), np.zeros(nv if fit_scale else 0)])
 
     def solve(Rk, x_start):
-        return least_squares(make_residual(Rk), x_start, method="lm", xtol=1e-15, ftol=1e-15,
-                             gtol=1e-15)
+        return least_squares(make_residual(Rk, keep), x_start, method="lm", xtol=1e-15,
+                             ftol=1e-15, gtol=1e-15)
 
+    # Outliers (a stray peak in the reference's band) are dropped: beyond OUTLIER_K robust σ
+    # of the residuals, refitted until none is left (at most OUTLIER_ROUNDS times).
     sol = solve(R, x0)
+    for _ in range(OUTLIER_ROUNDS):
+        res = make_residual(R)(sol.x)
+        sigma = 1.4826 * np.median(np.abs(res[keep]))
+        new = np.abs(res) <= OUTLIER_K * max(sigma, 1e-9)
+        if np.array_equal(new, keep):
+            break
+        keep = new
+        if np.bincount(vix[keep], minlength=nv).min() < min_points:
+            raise ValueError("master_fit: too few points left in a view after dropping "
+                             "outliers")
+        sol = solve(R, sol.x)
     n_par = sol.x.size
     dof = max(sol.fun.size - n_par, 1)
     s2 = float(sol.fun @ sol.fun) / dof
@@ -296,4 +321,5 @@ def master_fit(result, diameters_mm, *, u_diameters_mm=None, reference: str = "d
                      diameters_mm=tuple(float(v) for v in masters),
                      u_diameters_mm=tuple(float(v) for v in u_master),
                      shots_per_master=tuple(int(np.sum(group == g)) for g in range(len(masters))),
-                     rms_mm=float(np.sqrt(np.mean(sol.fun ** 2))), fitted_scale=fit_scale)
+                     rms_mm=float(np.sqrt(np.mean(sol.fun ** 2))), fitted_scale=fit_scale,
+                     n_points=int(keep.sum()), n_outliers=int((~keep).sum()))
