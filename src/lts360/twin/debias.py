@@ -253,6 +253,8 @@ class TwinCorrector:
         to match: saturation and the detector's threshold then act alike)."""
         full = float(2 ** self.design.sensor.bit_depth - 1)
         vals = np.concatenate([v.intensity[v.valid] for v in result.views.values()])
+        # a compensated view's points moved onto rays whose own peak was elsewhere: NaN there
+        vals = vals[np.isfinite(vals)]
         if vals.size == 0:
             return 0.8
         return float(np.clip(np.percentile(vals, 99.9) / full, 0.05, 1.0))
