@@ -126,3 +126,25 @@ def test_master_bad_input_is_one_line_exit_2(gauge_ref, tmp_path, capsys, value,
     err = capsys.readouterr().err.strip()
     assert rc == 2 and message in err and "\n" not in err, err
     assert not out.exists()
+
+
+def test_mastering_with_the_twin_fits_the_bias_corrected_references(gauge_ref, tmp_path,
+                                                                     capsys):
+    """With --bias-model twin the references' line-centre bias is removed before the fit, so
+    the masters set what the twin leaves (measurements made with the twin are not corrected
+    twice): the radial offsets differ from the plain mastering's by about the twin's bias."""
+    plain, twin = tmp_path / "plain.json", tmp_path / "twin.json"
+    base = ["compensate", str(gauge_ref), "--calibration", str(gauge_ref / "frame.json"),
+            "--master-diameter-mm", "19.9987"]
+    assert main(base + ["--out", str(plain)]) == 0
+    assert main(base + ["--out", str(twin), "--bias-model", "twin"]) == 0
+    out = capsys.readouterr().out
+    assert "reference twin bias correction: direct" in out
+    a = json.loads(plain.read_text())["view_radial_offsets_mm"]
+    b = json.loads(twin.read_text())["view_radial_offsets_mm"]
+    assert set(a) == set(b) == {"direct", "left", "right"}
+    assert any(abs(a[k] - b[k]) > 1e-3 for k in a)  # the twin's bias: several µm
+    rc = main(["compensate", str(gauge_ref), "--calibration", str(gauge_ref / "frame.json"),
+               "--out", str(tmp_path / "x.json"), "--bias-model", "twin"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "only with masters" in err and "\n" not in err

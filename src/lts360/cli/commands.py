@@ -402,6 +402,33 @@ def _master_args(args, cal) -> tuple[list[float], list[float]] | None:
     return D, U
 
 
+def _twin_corrected_raw(result, cal, grid, args):
+    """A reference shot's uncompensated measurement with its line-centre bias removed by its
+    twin, as the raw radii the mastering fits (the masters then set what the twin leaves, not
+    the bias the twin removes from every later measurement)."""
+    import dataclasses
+
+    from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
+    from lts360.twin import TwinCorrector
+    from lts360.twin.rig import twin_design
+
+    try:
+        twin = TwinCorrector(cal, twin_design(cal, args.twin_rig), input_u=None)
+    except (ValueError, KeyError, FileNotFoundError) as exc:
+        raise UsageError(f"--bias-model twin: {exc}") from None
+    plan = plan_inverse(cal, grid)
+
+    def measure(img):
+        return inverse_triangulate(img, cal, grid, peak=args.peak, plan=plan)
+
+    fixed = twin(result, measure, plan)
+    views = {n: dataclasses.replace(v, r_raw_mm=np.where(np.isfinite(v.r_mm), v.r_mm,
+                                                         v.r_raw_mm))
+             for n, v in fixed.views.items()}
+    print("  reference " + twin.log.describe())
+    return dataclasses.replace(fixed, views=views)
+
+
 def cmd_compensate(args) -> int:
     import dataclasses
 
@@ -420,6 +447,9 @@ def cmd_compensate(args) -> int:
         raise UsageError(f"--out: directory {str(out.parent)!r} does not exist")
     cal = load_calibration(args.calibration)
     masters = _master_args(args, cal)
+    if masters is None and args.bias_model != "none":
+        raise UsageError("--bias-model: only with masters (--master-diameter-mm): the §4.4 "
+                         "offsets of the paper are fitted on the raw views")
     sections = collect_sections(args.inputs, pitch_mm=0.0)
 
     def grid_about(radius):
@@ -460,7 +490,10 @@ def cmd_compensate(args) -> int:
             if abs(d - D[k]) > 2 * args.band_mm:
                 raise UsageError(f"{s.image_path}: reads Ø{d:.3f} mm, none of the masters "
                                  f"{args.master_diameter_mm}")
-        results.append(inverse_triangulate(img, cal, grid_about(D[k] / 2), peak=args.peak))
+        res = inverse_triangulate(img, cal, grid_about(D[k] / 2), peak=args.peak)
+        if args.bias_model == "twin":
+            res = _twin_corrected_raw(res, cal, grid_about(D[k] / 2), args)
+        results.append(res)
         shot_d.append(D[k])
         shot_u.append(U[k])
     missing = [d for d in D if d not in shot_d]

@@ -176,6 +176,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--master-u-mm", default=None, metavar="U[,U2]",
                    help="the masters' diameters' standard uncertainties (certificate; one per "
                         "diameter, or one for all; default 0)")
+    s.add_argument("--bias-model", choices=("none", "twin"), default="none",
+                   help="with masters: remove each reference's line-centre bias with its twin "
+                        "before the fit (for measurements made with --bias-model twin; "
+                        "default none)")
+    s.add_argument("--twin-rig", default=None,
+                   help="the twin's rig, if not the one the calibration records")
     s.set_defaults(func=cmd_compensate)
 
     s = sub.add_parser("score", help="score a measured cloud against the truth of rendered frames")
