@@ -157,14 +157,14 @@ def test_two_masters_recover_scales_too():
 
 
 def test_one_master_u_is_its_diameter_u_and_the_fit_covers_the_noise():
-    """Over many noisy draws the radial offsets scatter as the fit predicts (σ within 20 %),
+    """Over many noisy draws the radial offsets scatter as the fit predicts (σ within 30 %),
     and a master's diameter u moves every view's radial offset by u/2."""
     from lts360.recon.calibration.compensation import master_fit
 
     est, pred = [], []
-    for seed in range(60):
+    for seed in range(50):
         shots = [_master_shot((0.3 * k, -0.2 * k), 20.0, scales=False, seed=100 * seed + k,
-                              noise_mm=0.003) for k in range(2)]
+                              noise_mm=0.003, n=150) for k in range(2)]
         fit = master_fit(shots, 20.0, u_diameters_mm=0.002)
         est.append([fit.radial_offset_mm[n] for n in ARCS])
         pred.append([fit.u_fit_radial_offset_mm[n] for n in ARCS])
@@ -173,9 +173,10 @@ def test_one_master_u_is_its_diameter_u_and_the_fit_covers_the_noise():
     est, pred = np.array(est), np.array(pred)
     sd = est.std(axis=0, ddof=1)
     ratio = sd / pred.mean(axis=0)
-    # 60 draws: the sample σ is within ±20 % of the true σ with ~95 % probability (χ², 59 dof)
-    assert np.all((ratio > 0.8) & (ratio < 1.25)), ratio
-    assert np.all(np.abs(est.mean(axis=0) - [TRUE_DR[n] for n in ARCS]) < 3 * sd / np.sqrt(60))
+    # 50 draws: the sample σ is within −25/+30 % of the true σ with > 99 % probability
+    # (χ², 49 dof)
+    assert np.all((ratio > 0.75) & (ratio < 1.3)), ratio
+    assert np.all(np.abs(est.mean(axis=0) - [TRUE_DR[n] for n in ARCS]) < 3 * sd / np.sqrt(50))
 
 
 def test_master_bad_input_is_named():
