@@ -374,10 +374,10 @@ def _master_args(args, cal) -> tuple[list[float], list[float]] | None:
             raise UsageError("--master-u-mm: give the masters' diameters (--master-diameter-mm)")
         return None
     from lts360.scenes.rig_io import load_rig
-    from lts360.twin.rig import _recorded_rig
+    from lts360.twin.rig import recorded_rig
 
     D = _number_list(args.master_diameter_mm, "--master-diameter-mm")
-    rig = _recorded_rig(cal) or load_rig("paper")
+    rig = recorded_rig(cal) or load_rig("paper")
     d_max = 2.0 * rig.design.max_object_radius_mm if rig.design is not None else 40.0
     if not 1 <= len(D) <= 4:
         raise UsageError(f"--master-diameter-mm: one to four diameters, got {len(D)}")
@@ -403,30 +403,17 @@ def _master_args(args, cal) -> tuple[list[float], list[float]] | None:
 
 
 def _twin_corrected_raw(result, cal, grid, args):
-    """A reference shot's uncompensated measurement with its line-centre bias removed by its
-    twin, as the raw radii the mastering fits (the masters then set what the twin leaves, not
-    the bias the twin removes from every later measurement)."""
-    import dataclasses
-
-    from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
-    from lts360.twin import TwinCorrector
+    """A reference shot's raw radii with its line-centre bias removed by its twin."""
+    from lts360.twin import TwinCorrector, twin_corrected_raw
     from lts360.twin.rig import twin_design
 
     try:
         twin = TwinCorrector(cal, twin_design(cal, args.twin_rig), input_u=None)
     except (ValueError, KeyError, FileNotFoundError) as exc:
         raise UsageError(f"--bias-model twin: {exc}") from None
-    plan = plan_inverse(cal, grid)
-
-    def measure(img):
-        return inverse_triangulate(img, cal, grid, peak=args.peak, plan=plan)
-
-    fixed = twin(result, measure, plan)
-    views = {n: dataclasses.replace(v, r_raw_mm=np.where(np.isfinite(v.r_mm), v.r_mm,
-                                                         v.r_raw_mm))
-             for n, v in fixed.views.items()}
+    fixed = twin_corrected_raw(result, cal, grid, twin, peak=args.peak)
     print("  reference " + twin.log.describe())
-    return dataclasses.replace(fixed, views=views)
+    return fixed
 
 
 def cmd_compensate(args) -> int:

@@ -35,7 +35,7 @@ from lts360.scenes.rig import Rig
 from lts360.twin.profile import axial_form, loft_mesh, ray_radii, section_profile
 from lts360.twin.rig import laser_side_mirrors, twin_rig
 
-__all__ = ["TwinCorrector", "TwinLog", "DEFAULT_TWIN_SPP", "DEFAULT_SMOOTH_DEG", "INPUT_U",
+__all__ = ["TwinCorrector", "TwinLog", "twin_corrected_raw", "DEFAULT_TWIN_SPP", "DEFAULT_SMOOTH_DEG", "INPUT_U",
            "perturbed_design"]
 
 DEFAULT_TWIN_SPP = 64
@@ -405,3 +405,23 @@ class TwinCorrector:
         self.log.inputs = {name: {"by_input_um": d,
                                   "u_um": float(np.sqrt(sum(v * v for v in d.values())))}
                            for name, d in deltas.items()}
+
+
+def twin_corrected_raw(result, cal: Calibration, grid, twin: TwinCorrector, *,
+                       peak: str = "centroid"):
+    """A round reference's uncompensated measurement ``result`` (on ``grid``) with its
+    line-centre bias removed by ``twin``, returned as raw radii (``r_raw_mm``), for the
+    mastering fit (:func:`lts360.recon.calibration.compensation.master_fit`): the masters then
+    set what the twin leaves, not the bias the twin removes from every later measurement."""
+    from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
+
+    plan = plan_inverse(cal, grid)
+
+    def measure(img):
+        return inverse_triangulate(img, cal, grid, peak=peak, plan=plan)
+
+    fixed = twin(result, measure, plan)
+    views = {n: dataclasses.replace(v, r_raw_mm=np.where(np.isfinite(v.r_mm), v.r_mm,
+                                                         v.r_raw_mm))
+             for n, v in fixed.views.items()}
+    return dataclasses.replace(fixed, views=views)

@@ -32,7 +32,7 @@ import numpy as np
 from lts360.recon.calibration.model import Calibration
 from lts360.scenes.rig import Camera, Mirror, Rig
 
-__all__ = ["CalibratedCamera", "twin_rig", "twin_design", "laser_side_mirrors", "MAX_FRAME_MISMATCH_MM",
+__all__ = ["CalibratedCamera", "twin_rig", "twin_design", "recorded_rig", "laser_side_mirrors", "MAX_FRAME_MISMATCH_MM",
            "MAX_MIRROR_TILT_DEG"]
 
 #: The rig file's camera centre and the calibrated one (measurement frame) may differ by at most
@@ -180,7 +180,8 @@ def laser_side_mirrors(rig: Rig) -> tuple[Mirror, ...] | None:
     return tuple(_perpendicular(m, n_l, float(d_l)) for m in rig.mirrors)
 
 
-def _recorded_rig(cal: Calibration) -> Rig | None:
+def recorded_rig(cal: Calibration) -> Rig | None:
+    """The rig ``cal.optics`` records (``None`` without a record)."""
     import tomllib
 
     from lts360.scenes.rig_io import rig_from_dict
@@ -211,7 +212,7 @@ def twin_design(cal: Calibration, override: str | None = None) -> Rig:
     """
     from lts360.scenes.rig_io import load_rig
 
-    recorded = _recorded_rig(cal)
+    recorded = recorded_rig(cal)
     if override is None:
         if recorded is None:
             raise ValueError("the calibration records no optics (a calibration file older than "
