@@ -280,6 +280,10 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--placement-mm", type=float, default=0.3, metavar="R",
                    help="placements drawn uniformly in a disc of radius R mm about the axis "
                    "(default 0.3); results are also reported against the distance from it")
+    q.add_argument("--master", action="store_true",
+                   help="master the compensation with the gauge's known diameter")
+    q.add_argument("--bias-model", choices=("none", "twin"), default="none",
+                   help="twin: each placement (and the master's shots) corrected by its twin")
     q.set_defaults(func=cmd_study_plug_gauge)
 
     q = study_parser("monte-carlo", "GUM Supplement 1 Monte Carlo of the gauge radius, GUM "
