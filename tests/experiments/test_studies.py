@@ -156,6 +156,31 @@ def test_the_gauge_study_compensates_from_several_shots(tmp_path, truth_calibrat
                                  spp=2, seed=0, shots=0)
 
 
+def test_the_gauge_study_masters_with_the_gauge_diameter(tmp_path, truth_calibration):
+    from lts360.experiments.gauge_study import GAUGE_DIAMETER_MM, _compensated_calibration
+    from lts360.recon.calibration.model import load_calibration
+
+    path = _compensated_calibration(truth_calibration, tmp_path, rig="paper", noise="none",
+                                    spp=2, seed=0, shots=1, master=True)
+    assert path.name == "calibration-compensated-master.json"
+    cal = load_calibration(path)
+    assert set(cal.view_radial_offsets_mm) == {"direct", "left", "right"}
+    assert cal.master["diameters_mm"] == [GAUGE_DIAMETER_MM]
+
+
+@pytest.mark.slow
+def test_plug_gauge_study_with_master_and_twin(tmp_path, truth_calibration):
+    """The study as a user measures: mastered with the gauge's diameter, each placement
+    corrected by its twin (noise-free, true calibration: the mean within 3 µm)."""
+    from lts360.experiments.gauge_study import run_plug_gauge_study
+
+    table = run_plug_gauge_study(tmp_path, trials=2, calibration=truth_calibration, noise="none",
+                                 master=True, bias_model="twin", say=lambda *_: None)
+    assert table["n_measurements"] == 2
+    assert abs(table["mean_radius_error_mm"]) < 0.003
+    assert (tmp_path / "calibration-compensated-master-twin.json").is_file()
+
+
 def test_examples_and_algorithms_studies_end_to_end(tmp_path):
     if "llvm_ad_mono" not in mi.variants():
         pytest.skip("Mitsuba's llvm_ad_mono variant is not available")

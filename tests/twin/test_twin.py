@@ -111,27 +111,61 @@ def test_twin_rig_reproduces_the_calibration(paper_rig):
     assert twin.camera.f_number == paper_rig.camera.f_number
 
 
-def test_twin_rig_refuses_mirrors_tilted_against_the_sheet(paper_rig):
-    """A calibration whose mirror is 0.01° out of perpendicular to its laser plane (what an
-    estimated calibration carries) is refused: the twin would light the section's back off the
-    plane (measured: +30 / +50 µm in the mirror views for 0.03° / 0.05°)."""
+def _tilted_calibration(cal, deg: float, index: int = 0):
+    """``cal`` with mirror ``index`` turned by ``deg`` about an axis in the sheet's plane."""
     import dataclasses
 
+    m = cal.mirrors[index]
+    a = np.radians(deg)
+    axis = cal.R_cam_meas @ np.array([1.0, 1.0, 0.0]) / np.sqrt(2)  # in the sheet's plane
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    Rot = np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
+    tilted = dataclasses.replace(m, n=Rot @ m.n, corners_mm=None)
+    mirrors = list(cal.mirrors)
+    mirrors[index] = tilted
+    return dataclasses.replace(cal, mirrors=tuple(mirrors))
+
+
+def test_twin_rig_lights_through_mirrors_made_perpendicular(paper_rig):
+    """A calibration whose mirror is 0.05° out of perpendicular to its laser plane (what an
+    estimated calibration carries) is accepted: the camera side keeps the calibrated mirror,
+    the laser side turns it about its line in the sheet until perpendicular (the same line,
+    so the reflected sheet stays in the plane); the true calibration's laser side is its own."""
+    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.simulator.io import rig_truth
+    from lts360.twin.rig import laser_side_mirrors, twin_rig
+
+    cal = calibration_from_frame_truth(rig_truth(paper_rig, paper_rig.camera.K,
+                                                 paper_rig.camera.image_size))
+    assert laser_side_mirrors(twin_rig(cal, paper_rig)) is None
+    twin = twin_rig(_tilted_calibration(cal, 0.05), paper_rig)
+    lasers = laser_side_mirrors(twin)
+    assert lasers is not None
+    for cam_m, las_m in zip(twin.mirrors, lasers):
+        assert abs(las_m.normal[2]) < 1e-12  # perpendicular to the sheet z = 0
+        # the same line in the sheet: two points of the camera-side line lie on both planes
+        n, d = cam_m.normal, cam_m.d_mm
+        e = np.cross(n, [0.0, 0.0, 1.0])
+        p0 = np.linalg.lstsq(np.array([n, [0, 0, 1.0]]), np.array([d, 0.0]), rcond=None)[0]
+        for s in (-30.0, 30.0):
+            q = p0 + s * e / np.linalg.norm(e)
+            assert abs(q @ las_m.normal - las_m.d_mm) < 1e-9  # mm, round-off
+        # the reflected apex stays in the sheet
+        O = twin.laser.origin_mm
+        assert abs((O - 2 * (O @ las_m.normal - las_m.d_mm) * las_m.normal)[2]) < 1e-9
+    # the calibrated (tilted) mirror is what the camera sees (the axis lies in its plane)
+    assert abs(twin.mirrors[0].normal[2]) == pytest.approx(np.sin(np.radians(0.05)), rel=1e-6)
+
+
+def test_twin_rig_refuses_mirrors_far_from_perpendicular(paper_rig):
     from lts360.recon.calibration.model import calibration_from_frame_truth
     from lts360.simulator.io import rig_truth
     from lts360.twin.rig import twin_rig
 
     cal = calibration_from_frame_truth(rig_truth(paper_rig, paper_rig.camera.K,
                                                  paper_rig.camera.image_size))
-    m = cal.mirrors[0]
-    a = np.radians(0.01)
-    axis = cal.R_cam_meas @ np.array([1.0, 1.0, 0.0]) / np.sqrt(2)  # in the sheet's plane
-    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    Rot = np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
-    tilted = dataclasses.replace(m, n=Rot @ m.n, corners_mm=None)
-    bad = dataclasses.replace(cal, mirrors=(tilted,) + cal.mirrors[1:])
     with pytest.raises(ValueError, match="out of perpendicular"):
-        twin_rig(bad, paper_rig)
+        twin_rig(_tilted_calibration(cal, 1.0), paper_rig)
 
 
 def test_perturbed_design_moves_one_input(paper_rig):
@@ -368,3 +402,123 @@ def test_stencil_takes_the_nearest_section_each_side():
     assert _stencil(nb) == [(-0.5, "b"), (0.5, "c")]
     assert _stencil(nb[2:]) == [(0.5, "c"), (1.0, "d")]  # a scan's end: one side
     assert _stencil(nb[:1]) == [(-1.0, "a")]
+
+
+def test_a_calibration_without_optics_loads_and_the_twin_asks_for_the_rig(
+        small_gauge_frame, tmp_path, capsys):
+    """An older calibration.json (no optics record) loads; the twin then needs --twin-rig and
+    says so in one line (exit 2)."""
+    import json
+
+    from lts360.cli import main
+    from lts360.recon.calibration.model import calibration_to_dict, load_calibration
+
+    cal = load_calibration(small_gauge_frame / "frame.json")
+    assert cal.optics["rig"] == "paper" and "[design]" in cal.optics["rig_toml"]
+    old = calibration_to_dict(cal)
+    del old["optics"]
+    path = tmp_path / "old.json"
+    path.write_text(json.dumps(old))
+    assert load_calibration(path).optics == {}
+    rc = main(["measure", str(small_gauge_frame), "--calibration", str(path),
+               "--out", str(tmp_path / "c.ply"), "--bias-model", "twin"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "records no optics" in err and "--twin-rig" in err and "\n" not in err
+    assert not (tmp_path / "c.ply").exists()
+
+
+def test_a_twin_rig_of_another_design_is_refused(small_gauge_frame, tmp_path, capsys):
+    from lts360.cli import main
+
+    other = tmp_path / "other.toml"
+    other.write_text('base = "paper"\n[design]\nalpha_deg = 30.0\n')
+    rc = main(["measure", str(small_gauge_frame), "--calibration",
+               str(small_gauge_frame / "frame.json"), "--out", str(tmp_path / "c.ply"),
+               "--bias-model", "twin", "--twin-rig", str(other)])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "not the rig the calibration was made with" in err
+    assert "design.alpha_deg" in err and "\n" not in err
+
+
+def test_twin_design_takes_the_recorded_rig_and_an_override_of_the_same_design(paper_rig):
+    import dataclasses
+
+    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.io import rig_truth
+    from lts360.twin.rig import twin_design
+
+    cal = calibration_from_frame_truth(rig_truth(paper_rig, paper_rig.camera.K,
+                                                 paper_rig.camera.image_size))
+    assert twin_design(cal).camera.f_number == paper_rig.camera.f_number
+    assert twin_design(cal, "paper-f8").camera.f_number == load_rig("paper-f8").camera.f_number
+    with pytest.raises(ValueError, match="records no optics"):
+        twin_design(dataclasses.replace(cal, optics={}))
+    assert twin_design(dataclasses.replace(cal, optics={}), "paper").name == "paper"
+
+
+def _perturbed_calibration(cal, tilt_deg: float = 0.05, offset_mm: float = 0.05):
+    """``cal`` with each mirror turned by ±``tilt_deg`` about an axis in the sheet's plane
+    (out of perpendicular to the sheet) and moved by ±``offset_mm`` along its normal: the
+    size of an estimated calibration's plane errors."""
+    import dataclasses
+
+    mirrors = []
+    for k, m in enumerate(cal.mirrors):
+        s = 1.0 if k % 2 == 0 else -1.0
+        axis = cal.R_cam_meas @ np.array([1.0, s, 0.0]) / np.sqrt(2)
+        a = np.radians(s * tilt_deg)
+        K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+        Rot = np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
+        # turned about the mirror's line in the sheet (through its centre's foot there)
+        c = cal.T_meas_cam[:3, :3] @ m.corners_mm.mean(axis=0) + cal.T_meas_cam[:3, 3]
+        pivot = cal.R_cam_meas @ np.array([c[0], c[1], 0.0]) + cal.t_cam_meas_mm
+        pivot = pivot - (pivot @ m.n - m.d_mm) * m.n
+        n = Rot @ m.n
+        mirrors.append(dataclasses.replace(m, n=n, d_mm=float(n @ pivot) + s * offset_mm,
+                                           corners_mm=None))
+    return dataclasses.replace(cal, mirrors=tuple(mirrors))
+
+
+def _view_corrections(cal, frame_dir):
+    from lts360.recon.triangulation.measure import Section, measure_sections_following
+    from lts360.scenes.rig_io import load_rig
+    from lts360.twin import TwinCorrector
+
+    twin = TwinCorrector(cal, load_rig("paper"), spp=64, input_u=None)
+    measure_sections_following([Section(frame_dir / "image.png", 0.0)], cal, reject=True,
+                               correct=twin)
+    return twin.log.summary()
+
+
+@pytest.mark.slow
+def test_the_twin_of_a_perturbed_calibration_corrects_as_the_true_one(small_gauge_frame,
+                                                                      monkeypatch):
+    """The same image measured with the true calibration and with one whose mirrors are 0.05°
+    out of perpendicular to the sheet (turned about their line in it) and ±50 µm off: each
+    view's mean twin correction agrees with the true calibration's.
+
+    Measured (half scale, Ø12 gauge 2 mm off the axis): −10.36/−18.22/−6.75 µm (direct, left,
+    right) with the true calibration; +1.5, +2.2, −6.0 µm apart with the perturbed one (the
+    mirror views 0.1 mm apart make the measured profile a patchwork the twin renders); lit
+    through the calibrated mirrors as they are instead, the tilt alone moves the mirror
+    views' corrections by +69 and −60 µm.  The issue's 1 µm is NOT reached at this size."""
+    from lts360.recon.calibration.model import load_calibration
+
+    cal = load_calibration(small_gauge_frame / "frame.json")
+    true = _view_corrections(cal, small_gauge_frame)
+    est = _view_corrections(_perturbed_calibration(cal), small_gauge_frame)
+    tilted = _view_corrections(_perturbed_calibration(cal, offset_mm=0.0), small_gauge_frame)
+    assert set(true) == set(est) == {"direct", "left", "right"}
+    for name in true:
+        # 8 µm: what the half-scale test reaches (measured ≤ 6.0 µm), not the issue's 1 µm
+        assert abs(est[name]["mean_bias_um"] - true[name]["mean_bias_um"]) < 8.0, name
+        # the tilt alone (measured: 1.3, 2.2, 1.0 µm apart)
+        assert abs(tilted[name]["mean_bias_um"] - true[name]["mean_bias_um"]) < 3.0, name
+    # the same mirrors on the laser side light the back off the plane: tens of µm
+    import lts360.twin.debias as debias
+
+    monkeypatch.setattr(debias, "laser_side_mirrors", lambda rig: None)
+    old = _view_corrections(_perturbed_calibration(cal, offset_mm=0.0), small_gauge_frame)
+    assert max(abs(old[n]["mean_bias_um"] - true[n]["mean_bias_um"])
+               for n in ("left", "right")) > 30.0  # measured: 69 and 60 µm

@@ -296,7 +296,11 @@ def cmd_measure(args) -> int:
     if not valid.any():  # nothing to write: an empty cloud is no measurement
         print(f"lts360: measure: {refused}; nothing written", file=sys.stderr)
         return 3
-    write_cloud(out, cloud, comments=() if twin is None else _twin_comments(twin))
+    comments = [] if twin is None else _twin_comments(twin)
+    if args.compensate and cal.master:  # the mastering's u, for inspect's U
+        comments += [f"lts360 master {v} u_radius_um {1e3 * u:.4f}"
+                     for v, u in sorted(cal.master.get("u_radius_mm", {}).items())]
+    write_cloud(out, cloud, comments=comments)
     what = f"peak {args.peak}" if args.method == "inverse" else "classic (Steger 2-D)"
     print(f"{len(sections)} section(s), grid {grid.n_theta} θ × {grid.n_r} r, {what}: "
           f"{int(valid.sum())} valid points of {len(cloud)} θ samples in {dt:.2f} s -> {out}")
@@ -337,8 +341,8 @@ def _twin_u_mm(cloud_path) -> float | None:
 
 def _twin_corrector(args, cal):
     """The ``--bias-model twin`` hook, or a usage error naming what is wrong."""
-    from lts360.scenes.rig_io import load_rig
     from lts360.twin import TwinCorrector
+    from lts360.twin.rig import twin_design
 
     if args.method != "inverse":
         raise UsageError("--bias-model twin: needs the inverse method (the twin is measured "
@@ -348,7 +352,7 @@ def _twin_corrector(args, cal):
     if not 0 <= args.twin_axial_mm <= 10:
         raise UsageError(f"--twin-axial-mm: must be in [0, 10], got {args.twin_axial_mm}")
     try:
-        return TwinCorrector(cal, load_rig(args.twin_rig), material=args.twin_material,
+        return TwinCorrector(cal, twin_design(cal, args.twin_rig), material=args.twin_material,
                              spp=args.twin_spp, axial_reach_mm=args.twin_axial_mm)
     except (ValueError, KeyError, FileNotFoundError) as exc:
         raise UsageError(f"--bias-model twin: {exc}") from None
@@ -373,10 +377,68 @@ def _flag_counts(cloud) -> list[tuple[str, int]]:
     return sorted(rows, key=lambda t: -t[1])
 
 
+def _number_list(text: str, name: str) -> list[float]:
+    try:
+        return [float(v) for v in str(text).split(",") if v.strip()]
+    except ValueError:
+        raise UsageError(f"{name}: expected numbers separated by commas, got {text!r}") from None
+
+
+def _master_args(args, cal) -> tuple[list[float], list[float]] | None:
+    """``--master-diameter-mm`` / ``--master-u-mm`` checked against the rig the calibration
+    records (the paper preset without a record): None without masters."""
+    if args.master_diameter_mm is None:
+        if args.master_u_mm is not None:
+            raise UsageError("--master-u-mm: give the masters' diameters (--master-diameter-mm)")
+        return None
+    from lts360.scenes.rig_io import load_rig
+    from lts360.twin.rig import recorded_rig
+
+    D = _number_list(args.master_diameter_mm, "--master-diameter-mm")
+    rig = recorded_rig(cal) or load_rig("paper")
+    d_max = 2.0 * rig.design.max_object_radius_mm if rig.design is not None else 40.0
+    if not 1 <= len(D) <= 4:
+        raise UsageError(f"--master-diameter-mm: one to four diameters, got {len(D)}")
+    for d in D:
+        if not (np.isfinite(d) and 0 < d <= d_max):
+            raise UsageError(f"--master-diameter-mm: each must be in (0, {d_max:g}] mm (rig "
+                             f"{rig.name!r}'s objects), got {d:g}")
+    from lts360.recon.calibration.compensation import MIN_MASTER_SPREAD_MM
+
+    ds = sorted(D)
+    if len(D) > 1 and min(b - a for a, b in zip(ds, ds[1:])) < MIN_MASTER_SPREAD_MM:
+        raise UsageError(f"--master-diameter-mm: the masters must differ by at least "
+                         f"{MIN_MASTER_SPREAD_MM:g} mm (two of the same diameter set no scale), "
+                         f"got {args.master_diameter_mm}")
+    U = [0.0] * len(D) if args.master_u_mm is None else _number_list(args.master_u_mm,
+                                                                      "--master-u-mm")
+    if len(U) == 1 and len(D) > 1:
+        U = U * len(D)
+    if len(U) != len(D) or not all(np.isfinite(u) and 0 <= u <= 0.1 for u in U):
+        raise UsageError(f"--master-u-mm: one u in [0, 0.1] mm per master diameter (or one for "
+                         f"all), got {args.master_u_mm}")
+    return D, U
+
+
+def _twin_corrected_raw(result, cal, grid, args):
+    """A reference shot's raw radii with its line-centre bias removed by its twin."""
+    from lts360.twin import TwinCorrector, twin_corrected_raw
+    from lts360.twin.rig import twin_design
+
+    try:
+        twin = TwinCorrector(cal, twin_design(cal, args.twin_rig), input_u=None)
+    except (ValueError, KeyError, FileNotFoundError) as exc:
+        raise UsageError(f"--bias-model twin: {exc}") from None
+    fixed = twin_corrected_raw(result, cal, grid, twin, peak=args.peak)
+    print("  reference " + twin.log.describe())
+    return fixed
+
+
 def cmd_compensate(args) -> int:
     import dataclasses
 
-    from lts360.recon.calibration.compensation import joint_view_offsets
+    from lts360.geometry.fit import fit_circle
+    from lts360.recon.calibration.compensation import joint_view_offsets, master_fit
     from lts360.recon.calibration.model import load_calibration, save_calibration
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.inverse import inverse_triangulate
@@ -389,17 +451,80 @@ def cmd_compensate(args) -> int:
     if not out.parent.exists():
         raise UsageError(f"--out: directory {str(out.parent)!r} does not exist")
     cal = load_calibration(args.calibration)
-    grid = CylGrid.from_ranges((args.radius_mm - args.band_mm, args.radius_mm + args.band_mm),
-                               theta_step_deg=args.theta_step_deg, r_step_mm=args.r_step_mm)
+    masters = _master_args(args, cal)
+    if masters is None and args.bias_model != "none":
+        raise UsageError("--bias-model: only with masters (--master-diameter-mm): the §4.4 "
+                         "offsets of the paper are fitted on the raw views")
     sections = collect_sections(args.inputs, pitch_mm=0.0)
-    results = [inverse_triangulate(read_image(s.image_path), cal, grid, peak=args.peak)
-               for s in sections]
-    # The mirror views are moved onto the direct one, as in the paper.
-    offsets = joint_view_offsets(results)
-    save_calibration(out, dataclasses.replace(cal, view_offsets_mm=offsets))
-    print(f"§4.4 offsets from {len(results)} reference shot(s), one circle each, the views "
-          f"shared: " + ", ".join(f"{k} ({1e3 * v[0]:+.1f}, {1e3 * v[1]:+.1f}) µm"
-                                  for k, v in sorted(offsets.items())) + f" -> {out}")
+
+    def grid_about(radius):
+        if not args.band_mm < radius:
+            raise UsageError(f"--band-mm: must be below the reference's radius {radius:g} mm, "
+                             f"got {args.band_mm:g}")
+        return CylGrid.from_ranges((radius - args.band_mm, radius + args.band_mm),
+                                   theta_step_deg=args.theta_step_deg, r_step_mm=args.r_step_mm)
+
+    if masters is None:
+        grid = grid_about(args.radius_mm)
+        results = [inverse_triangulate(read_image(s.image_path), cal, grid, peak=args.peak)
+                   for s in sections]
+        # The mirror views are moved onto the direct one, as in the paper.
+        offsets = joint_view_offsets(results)
+        save_calibration(out, dataclasses.replace(cal, view_offsets_mm=offsets))
+        print(f"§4.4 offsets from {len(results)} reference shot(s), one circle each, the views "
+              f"shared: " + ", ".join(f"{k} ({1e3 * v[0]:+.1f}, {1e3 * v[1]:+.1f}) µm"
+                                      for k, v in sorted(offsets.items())) + f" -> {out}")
+        return 0
+    D, U = masters
+    results, shot_d, shot_u = [], [], []
+    for s in sections:
+        img = read_image(s.image_path)
+        if len(D) == 1:
+            k = 0
+        else:  # which master: a coarse look over all of them
+            lo, hi = min(D) / 2 - args.band_mm, max(D) / 2 + args.band_mm
+            coarse = inverse_triangulate(img, cal, CylGrid.from_ranges(
+                (max(lo, 0.5), hi), theta_step_deg=1.0, r_step_mm=0.02), peak=args.peak)
+            pts = np.concatenate([v.points_meas_mm[v.valid, :2]
+                                  for v in coarse.views.values()])
+            if len(pts) < 10:
+                raise UsageError(f"{s.image_path}: no master found within the masters' radii "
+                                 f"± --band-mm")
+            d = 2 * fit_circle(pts).radius_mm
+            k = int(np.argmin([abs(d - m) for m in D]))
+            if abs(d - D[k]) > 2 * args.band_mm:
+                raise UsageError(f"{s.image_path}: reads Ø{d:.3f} mm, none of the masters "
+                                 f"{args.master_diameter_mm}")
+        res = inverse_triangulate(img, cal, grid_about(D[k] / 2), peak=args.peak)
+        if args.bias_model == "twin":
+            res = _twin_corrected_raw(res, cal, grid_about(D[k] / 2), args)
+        results.append(res)
+        shot_d.append(D[k])
+        shot_u.append(U[k])
+    missing = [d for d in D if d not in shot_d]
+    if missing:
+        raise UsageError(f"--master-diameter-mm: no reference shot of the Ø{missing[0]:g} mm "
+                         f"master among the inputs")
+    try:
+        fit = master_fit(results, shot_d, u_diameters_mm=shot_u)
+    except ValueError as exc:
+        raise UsageError(f"compensate: {exc}") from None
+    rec = fit.to_dict()
+    save_calibration(out, dataclasses.replace(
+        cal, view_offsets_mm=fit.offsets_mm, view_radial_offsets_mm=fit.radial_offset_mm,
+        view_scales=fit.scale, master=rec))
+    views = sorted(fit.radial_offset_mm)
+    print(f"mastered with {len(results)} shot(s) of " + " and ".join(
+        f"Ø{d:g} mm (u {1e3 * u:.1f} µm)" for d, u in zip(fit.diameters_mm, fit.u_diameters_mm))
+        + f", rms {1e3 * fit.rms_mm:.2f} µm ({fit.n_outliers} of "
+          f"{fit.n_points + fit.n_outliers} points dropped as outliers) -> {out}")
+    for v in views:
+        t = fit.offsets_mm.get(v)
+        print(f"  {v:8s} " + (f"translation ({1e3 * t[0]:+.1f}, {1e3 * t[1]:+.1f}) µm, "
+                              if t is not None else "") +
+              f"radial {1e3 * fit.radial_offset_mm[v]:+.2f} µm"
+              + (f", scale {fit.scale[v]:.6f}" if fit.fitted_scale else "")
+              + f"; u(radius) {1e3 * fit.u_radius_mm[v]:.2f} µm")
     return 0
 
 
@@ -551,6 +676,13 @@ def cmd_inspect(args) -> int:
     u_twin = _twin_u_mm(args.cloud)
     if u_twin is not None:  # the bias correction's own type-B part, beside --u-radial-mm
         u_radial = float(np.hypot(u_radial, u_twin))
+    from lts360.recon.triangulation.cloud import read_cloud_master
+
+    mastered = read_cloud_master(args.cloud)
+    # the mastering's u (the masters' diameters and the fit): the largest of the views'
+    u_master = 1e-3 * max(mastered.values()) if mastered else None
+    if u_master is not None:
+        u_radial = float(np.hypot(u_radial, u_master))
     t0 = time.perf_counter()
     ins = inspect_cloud(cloud, nominal=nominal, band=band, calibration=cal, truth=truth,
                         lump_threshold_mm=args.lump_mm, n_draws=args.draws, seed=args.seed,
@@ -560,6 +692,10 @@ def cmd_inspect(args) -> int:
     ins.data["command"] = "lts360 " + " ".join(shlex.quote(a) for a in args.argv) \
         if getattr(args, "argv", None) else None
     ins.data["calibration"] = args.calibration
+    if u_master is not None:
+        ins.data["settings"]["master_u_radius_mm"] = u_master
+        print(f"  the cloud is mastered: its u ({1e3 * u_master:.2f} µm radial, the masters' "
+              f"diameters and the fit) is counted in the sizes' U")
     if u_twin is not None:
         ins.data["settings"]["twin_u_inputs_mm"] = u_twin
         print(f"  the cloud is twin-corrected: its inputs' u ({1e3 * u_twin:.2f} µm radial) is "

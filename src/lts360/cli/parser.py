@@ -141,10 +141,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "rig with --twin-rig's optics, laser and sensor) with the same plan and "
                         "subtracting its error per view and θ; adds ~1-3 s per section "
                         "(default none)")
-    s.add_argument("--twin-rig", default="paper",
+    s.add_argument("--twin-rig", default=None,
                    help="rig file (preset or TOML) whose optics, laser, sensor and mirror "
                         "extents the twin uses; its geometry comes from --calibration "
-                        "(default paper)")
+                        "(default: the rig the calibration or frame records; an override must "
+                        "have the recorded rig's design geometry)")
     s.add_argument("--twin-material", default="ground-steel",
                    help="the twin's surface (see lts360 objects; default ground-steel, the plug "
                         "gauge's)")
@@ -168,6 +169,19 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--radius-mm", type=float, default=10.0,
                    help="the reference's nominal radius (default 10)")
     s.add_argument("--band-mm", type=float, default=1.0, help="radial search band ± (default 1)")
+    s.add_argument("--master-diameter-mm", default=None, metavar="D[,D2]",
+                   help="mastering: the references' known diameters (one: per view a radial "
+                        "offset beside the offsets; two or more, ≥ 1 mm apart: also a scale; "
+                        "each shot is matched to its master); default: the paper's §4.4 only")
+    s.add_argument("--master-u-mm", default=None, metavar="U[,U2]",
+                   help="the masters' diameters' standard uncertainties (certificate; one per "
+                        "diameter, or one for all; default 0)")
+    s.add_argument("--bias-model", choices=("none", "twin"), default="none",
+                   help="with masters: remove each reference's line-centre bias with its twin "
+                        "before the fit (for measurements made with --bias-model twin; "
+                        "default none)")
+    s.add_argument("--twin-rig", default=None,
+                   help="the twin's rig, if not the one the calibration records")
     s.set_defaults(func=cmd_compensate)
 
     s = sub.add_parser("score", help="score a measured cloud against the truth of rendered frames")
@@ -272,6 +286,10 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--placement-mm", type=float, default=0.3, metavar="R",
                    help="placements drawn uniformly in a disc of radius R mm about the axis "
                    "(default 0.3); results are also reported against the distance from it")
+    q.add_argument("--master", action="store_true",
+                   help="master the compensation with the gauge's known diameter")
+    q.add_argument("--bias-model", choices=("none", "twin"), default="none",
+                   help="twin: each placement (and the master's shots) corrected by its twin")
     q.set_defaults(func=cmd_study_plug_gauge)
 
     q = study_parser("monte-carlo", "GUM Supplement 1 Monte Carlo of the gauge radius, GUM "

@@ -68,7 +68,8 @@ def cmd_study_plug_gauge(args) -> int:
     table = run_plug_gauge_study(args.out, trials=args.trials, calibration=args.calibration,
                                  noise=args.noise, spp=args.spp, rig=args.rig,
                                  compensation_shots=args.compensation_shots,
-                                 placement_mm=args.placement_mm,
+                                 placement_mm=args.placement_mm, master=args.master,
+                                 bias_model=args.bias_model,
                                  workers=args.workers or 1, **common)
     print(format_gauge_table(table))
     print(f"wrote {args.out}/ (table.txt, table.json, plug-gauge.png, trials/results.nc)")

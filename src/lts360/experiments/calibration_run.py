@@ -213,7 +213,16 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
     images = read_calibration_images(images_dir)
     result = calibrate_rig(images, tangential=tangential, progress=say,
                            camera_model_rounds=camera_model_rounds)
-    save_calibration(out / "calibration.json", result.calibration)
+    from dataclasses import replace as _replace
+
+    from lts360.scenes.rig_io import load_rig as _load_rig
+    from lts360.simulator.io import rig_record
+
+    # The optics the rig is measured with (its own f-number, not the calibration shots'),
+    # for the line-centre bias twin.
+    cal = _replace(result.calibration, optics=rig_record(_load_rig(rig_name), rig_name))
+    result = _replace(result, calibration=cal)
+    save_calibration(out / "calibration.json", cal)
     report = calibration_report(result)
     if truth is not None:
         report["accuracy"] = calibration_accuracy(result.calibration, truth, result)

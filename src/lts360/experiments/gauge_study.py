@@ -155,17 +155,31 @@ def gauge_window_pixels(cal_path, r_mm: float, *, band_mm: float = 1.0,
 
 def measure_gauge_image(image, cal_path: str, *, r_true_mm: float, band_mm: float = 1.0,
                         theta_step_deg: float = 0.1, r_step_mm: float = 0.005,
-                        compensate: bool = True, cloud_path=None) -> dict:
+                        compensate: bool = True, cloud_path=None,
+                        bias_model: str = "none") -> dict:
     """Measure one image of a round section and score it as the paper does (no truth but
-    the nominal radius): circle fit, radius error, and the point radii about the centre."""
+    the nominal radius): circle fit, radius error, and the point radii about the centre.
+    ``bias_model="twin"``: the line-centre bias removed by the section's twin (the rig the
+    calibration records)."""
     from lts360.geometry.fit import fit_circle
     from lts360.recon.triangulation.inverse import InversePlan, inverse_triangulate
 
     cal, grid, kernel = _plan(str(cal_path), float(r_true_mm), band_mm, theta_step_deg, r_step_mm)
-    if isinstance(kernel, InversePlan):
-        res = inverse_triangulate(image, cal, grid, plan=kernel, compensate=compensate)
-    else:
-        res = kernel(image, compensate=compensate)
+
+    def measure(img):
+        if isinstance(kernel, InversePlan):
+            return inverse_triangulate(img, cal, grid, plan=kernel, compensate=compensate)
+        return kernel(img, compensate=compensate)
+
+    res = measure(image)
+    if bias_model == "twin":
+        from lts360.twin import TwinCorrector
+        from lts360.twin.rig import twin_design
+
+        twin = TwinCorrector(cal, twin_design(cal), input_u=None)
+        res = twin(res, measure, kernel if isinstance(kernel, InversePlan) else kernel.plan)
+    elif bias_model != "none":
+        raise ValueError(f"bias_model must be none or twin, got {bias_model!r}")
     if cloud_path is not None:
         from lts360.recon.triangulation.cloud import write_cloud
         from lts360.recon.triangulation.measure import result_to_cloud
@@ -221,7 +235,8 @@ def plug_gauge_trial(trial: Trial) -> TrialOutput:
                            pixels_xy=gauge_window_pixels(p["calibration"], r_mm, band_mm=band))
     cloud = Path(p["clouds"]) / f"placement_{trial.index:02d}.ply" if p.get("clouds") else None
     m = measure_gauge_image(frame.image, p["calibration"], r_true_mm=r_mm, band_mm=band,
-                            compensate=bool(p["compensate"]), cloud_path=cloud)
+                            compensate=bool(p["compensate"]), cloud_path=cloud,
+                            bias_model=p.get("bias_model", "none"))
     m["offset_mm"] = float(np.hypot(obj.placement.x_mm, obj.placement.y_mm))
     arrays = {k: m.pop(k) for k in ("view_mean_mm", "view_std_mm", "view_n") if k in m}
     values = {k: float(v) for k, v in m.items()}
@@ -285,7 +300,8 @@ def format_gauge_table(ours: dict) -> str:
 
 
 def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str, spp: int,
-                             seed: int, shots: int = 1) -> Path:
+                             seed: int, shots: int = 1, master: bool = False,
+                             bias_model: str = "none") -> Path:
     """§4.4: measure the gauge at the nominal position (``shots`` times, turned about its axis
     between shots: new speckle, new sensor noise), put the mirror views on one circle with the
     direct view (:func:`lts360.recon.calibration.compensation.joint_view_offsets`, all shots jointly),
@@ -306,6 +322,9 @@ def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str,
         raise ValueError(f"compensation shots must be in [1, 100], got {shots}")
     path = out / ("calibration-compensated.json" if shots == 1
                   else f"calibration-compensated-{int(shots)}shots.json")
+    if master:  # mastered with the gauge's known diameter (and its twin: the bias it leaves)
+        path = path.with_name(path.stem + ("-master-twin" if bias_model == "twin"
+                                           else "-master") + ".json")
     if path.is_file():
         return path
     if mi.variant() is None:
@@ -318,9 +337,23 @@ def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str,
     for k in range(int(shots)):
         frame = simulate_frame(load_rig(rig), obj, spp=spp, seed=seed + 777_777 + k, noise=noise,
                                pixels_xy=gauge_window_pixels(cal_path, r))
-        results.append(inverse_triangulate(frame.image, cal, grid))
-    offsets = joint_view_offsets(results)
-    cal = dataclasses.replace(cal, view_offsets_mm=offsets)
+        res = inverse_triangulate(frame.image, cal, grid)
+        if master and bias_model == "twin":
+            from lts360.twin import TwinCorrector, twin_corrected_raw
+            from lts360.twin.rig import twin_design
+
+            res = twin_corrected_raw(res, cal, grid,
+                                     TwinCorrector(cal, twin_design(cal), input_u=None))
+        results.append(res)
+    if master:
+        from lts360.recon.calibration.compensation import master_fit
+
+        fit = master_fit(results, GAUGE_DIAMETER_MM)
+        cal = dataclasses.replace(cal, view_offsets_mm=fit.offsets_mm,
+                                  view_radial_offsets_mm=fit.radial_offset_mm,
+                                  view_scales=fit.scale, master=fit.to_dict())
+    else:
+        cal = dataclasses.replace(cal, view_offsets_mm=joint_view_offsets(results))
     save_calibration(path, cal)
     return path
 
@@ -328,7 +361,7 @@ def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str,
 def ensure_calibration(out: Path, calibration=None, *, rig: str = "paper", noise: str = "realistic",
                        seed: int = 0, spp: int = 16, compensate: bool = True,
                        calibrate_options: dict | None = None, compensation_shots: int = 1,
-                       say=print) -> Path:
+                       master: bool = False, bias_model: str = "none", say=print) -> Path:
     """The calibration a study measures with: ``calibration`` if given, else one estimated from
     rendered chessboard images into ``out/calibration/`` (kept for the next run); with
     ``compensate``, a copy with the §4.4 view offsets from ``compensation_shots`` shots of the
@@ -345,7 +378,8 @@ def ensure_calibration(out: Path, calibration=None, *, rig: str = "paper", noise
     calibration = Path(calibration)
     if compensate:
         calibration = _compensated_calibration(calibration, out, rig=rig, noise=noise, spp=spp,
-                                               seed=seed, shots=compensation_shots)
+                                               seed=seed, shots=compensation_shots,
+                                               master=master, bias_model=bias_model)
     return calibration
 
 
@@ -354,17 +388,22 @@ def run_plug_gauge_study(out_dir, *, trials: int = 10, seed: int = 0, calibratio
                          compensate: bool = True, workers: int | None = 1,
                          dask_address: str | None = None, calibrate_options: dict | None = None,
                          compensation_shots: int = 1, placement_mm: float = DEFAULT_PLACEMENT_MM,
-                         say=print) -> dict:
+                         master: bool = False, bias_model: str = "none", say=print) -> dict:
     """Calibrate (unless ``calibration``), compensate, measure ``trials`` placements (offsets
-    drawn in a disc of radius ``placement_mm``), tabulate (also against the offset)."""
+    drawn in a disc of radius ``placement_mm``), tabulate (also against the offset).
+    ``master``: the compensation mastered with the gauge's known diameter; ``bias_model``
+    ``"twin"``: each placement (and the master's shots) corrected by its twin."""
+    if bias_model not in ("none", "twin"):
+        raise ValueError(f"bias_model must be none or twin, got {bias_model!r}")
     placement_band_mm(placement_mm)  # validates
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     calibration = ensure_calibration(out, calibration, rig=rig, noise=noise, seed=seed, spp=spp,
                                      compensate=compensate, calibrate_options=calibrate_options,
-                                     compensation_shots=compensation_shots, say=say)
+                                     compensation_shots=compensation_shots, master=master,
+                                     bias_model=bias_model, say=say)
     params = [dict(p, calibration=str(calibration.resolve()), noise=noise, spp=spp, rig=rig,
-                   compensate=compensate, clouds=str((out / "clouds").resolve()),
+                   compensate=compensate, bias_model=bias_model, clouds=str((out / "clouds").resolve()),
                    placement_mm=float(placement_mm))
               for p in gauge_placements(trials, seed, offset_mm=placement_mm)]
     ds = run_study(out / "trials", plan_trials(params, seed), plug_gauge_trial, name="plug-gauge",

@@ -45,6 +45,9 @@ MIRROR_STEP_MM = 1e-2
 
 MM2_PER_M2 = 1.0e6
 _SHADOW_EPS = 1e-4
+#: Where a shadow ray restarts in front of a mirror it met (mm): clear of the mirror's shape in
+#: float32 at ~100 mm coordinates.
+SHADOW_CLEARANCE_MM = 1e-4
 _GAUSS_CUT = 16.1  # exp(-16.1) = 1e-7  # relative shortening of shadow segments (segments are 10–300 mm long)
 
 
@@ -81,8 +84,13 @@ class LaserParams:
     power_W: float
 
 
-def laser_params(rig, *, laser_on: bool = True) -> tuple[LaserParams, tuple[MirrorParams, ...]]:
-    """Extract the integrator's parameters from a :class:`lts360.scenes.rig.Rig`."""
+def laser_params(rig, *, laser_on: bool = True, mirrors=None
+                 ) -> tuple[LaserParams, tuple[MirrorParams, ...]]:
+    """Extract the integrator's parameters from a :class:`lts360.scenes.rig.Rig`.
+
+    ``mirrors`` (sequence of :class:`lts360.scenes.rig.Mirror`): the mirrors the laser light
+    meets (method of images), if not the rig's own (the twin's laser side); default
+    ``rig.mirrors``."""
     las = rig.laser
     lp = LaserParams(origin_mm=tuple(map(float, las.origin_mm)),
                      direction=tuple(map(float, las.direction)),
@@ -97,7 +105,8 @@ def laser_params(rig, *, laser_on: bool = True) -> tuple[LaserParams, tuple[Mirr
                              center_mm=tuple(map(float, m.center_mm)),
                              u_axis=tuple(map(float, m.u_axis)), v_axis=tuple(map(float, m.v_axis)),
                              half_width_mm=m.width_mm / 2.0, half_height_mm=m.height_mm / 2.0,
-                             reflectance=float(m.reflectance)) for m in rig.mirrors)
+                             reflectance=float(m.reflectance))
+                for m in (rig.mirrors if mirrors is None else mirrors))
     return lp, mps
 
 
@@ -108,24 +117,32 @@ def _sequences(n_mirrors: int, max_bounces: int) -> list[tuple[int, ...]]:
 
 
 def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, max_bounces: int = 2,
-                    ambient: bool = False):
+                    ambient: bool = False, clearance_mm: float = SHADOW_CLEARANCE_MM):
     """Build the integrator (the Mitsuba variant must already be set).
 
     Parameters
     ----------
     laser : LaserParams
     mirrors : tuple of MirrorParams
-        Their planes must match the mirror shapes in the scene.
+        The mirrors the laser light meets.  Their planes should match the mirror shapes in
+        the scene; where they do not (the twin's laser-side mirrors, turned by a few 0.01°
+        about their line in the sheet), ``clearance_mm`` must exceed how far a shape lies
+        in front of its plane where the light meets it.
     max_bounces : int, [0, 3]
         Longest mirror sequence on the camera side and on the laser side.
     ambient : bool
         Whether to sample the scene's emitters (ambient light).
+    clearance_mm : float, > 0
+        How far in front of a mirror's plane a shadow ray restarts after it (the mirror's own
+        shape must not occlude it).
     """
     import drjit as dr
     import mitsuba as mi
 
     if not 0 <= max_bounces <= 3:
         raise ValueError(f"max_bounces must be in [0, 3], got {max_bounces}")
+    if not 0 < clearance_mm <= 1.0:
+        raise ValueError(f"clearance_mm must be in (0, 1], got {clearance_mm}")
     seqs = _sequences(len(mirrors), max_bounces)
     O = np.asarray(laser.origin_mm)
     n_l = np.asarray(laser.normal)
@@ -208,7 +225,7 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
                 q = hit - P(m.center_mm)
                 vis = vis & (dr.abs(dr.dot(q, V(m.u_axis))) <= m.half_width_mm) \
                           & (dr.abs(dr.dot(q, V(m.v_axis))) <= m.half_height_mm)
-                hit_off = hit + n * 1e-4  # just in front of the mirror surface
+                hit_off = hit + n * clearance_mm  # just in front of the mirror surface
                 if first:
                     ray = si.spawn_ray_to(hit_off)
                 else:

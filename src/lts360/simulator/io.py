@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["atomic_path", "write_png", "read_png", "write_exr", "read_exr", "write_json",
-           "rig_truth"]
+           "rig_truth", "rig_record"]
 
 
 class atomic_path:
@@ -87,16 +87,32 @@ def _jsonable(value):
     raise TypeError(f"not JSON serialisable: {type(value)}")
 
 
+def rig_record(rig, source: str | None = None) -> dict:
+    """What a frame or a calibration records of the rig it was made with (for the twin):
+    ``rig`` (the preset name or file given, else the rig's name) and ``rig_toml`` (its TOML:
+    design, lens, sheet, sensor; absent for a rig not built from a design)."""
+    from lts360.scenes.rig import RigError
+    from lts360.scenes.rig_io import rig_to_toml
+
+    out = {"rig": str(source) if source else rig.name}
+    try:
+        out["rig_toml"] = rig_to_toml(rig)
+    except RigError:
+        pass
+    return out
+
+
 def rig_truth(rig, K: np.ndarray, image_size: tuple[int, int]) -> dict:
     """The true rig in world millimetres, in the ``frame.json`` layout.
 
     ``camera.R``/``camera.t`` map world to camera (``X_cam = R X_world + t``); ``K`` and
     ``image_size`` are those of the written image (scaled with ``--scale``); mirror planes
-    and the laser plane are ``n · X = d`` in the world frame.
+    and the laser plane are ``n · X = d`` in the world frame; ``rig`` is :func:`rig_record`.
     """
     cam = rig.camera
     n_l, d_l = rig.laser.plane
     return {
+        "rig": rig_record(rig),
         "camera": {"K": K, "dist": cam.distortion, "R": cam.R, "t": cam.t_mm,
                    "image_size": list(image_size), "f_number": cam.f_number,
                    "focus_distance_mm": cam.focus_distance_mm, "pixel_pitch_um": cam.pixel_pitch_um

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lts360.geometry.camera import scale_intrinsics
-from lts360.simulator.scene import SceneSpec, load_scene
+from lts360.simulator.scene import LASER_MIRRORS_CLEARANCE_MM, SceneSpec, load_scene
 
 __all__ = ["RenderResult", "render_radiance", "render_pixels", "render_radiance_pixels",
            "prepare_scene",
@@ -94,8 +94,11 @@ def _setup(spec, *, spp, scale, max_bounces, thin_lens, laser_on, integrator, sa
     sensor["sampler"] = {"type": sampler, "sample_count": spp}
     scene = load_scene(spec, sensor)
     if integrator == "laser":
-        lp, mps = laser_params(spec.rig, laser_on=laser_on)
-        integ = make_integrator(lp, mps, max_bounces=max_bounces, ambient=spec.ambient != "off")
+        lp, mps = laser_params(spec.rig, laser_on=laser_on, mirrors=spec.laser_mirrors)
+        kw = ({} if spec.laser_mirrors is None
+              else {"clearance_mm": LASER_MIRRORS_CLEARANCE_MM})
+        integ = make_integrator(lp, mps, max_bounces=max_bounces, ambient=spec.ambient != "off",
+                                **kw)
     else:
         integ = mi.load_dict({"type": "path", "max_depth": max_bounces + 2})
     return scene, integ

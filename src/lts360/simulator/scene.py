@@ -16,7 +16,7 @@ import trimesh
 from lts360.scenes.rig import Mirror, Rig
 from lts360.simulator.materials import material_to_bsdf, mirror_bsdf
 
-__all__ = ["AMBIENT_RADIANCE_W_M2_SR", "SceneSpec", "mirror_shape", "mesh_shape", "chessboard_shape",
+__all__ = ["AMBIENT_RADIANCE_W_M2_SR", "LASER_MIRRORS_CLEARANCE_MM", "SceneSpec", "mirror_shape", "mesh_shape", "chessboard_shape",
            "scene_dict", "load_scene"]
 
 #: Effective in-band radiance of the ambient light (a uniform environment), W m⁻² sr⁻¹.
@@ -24,6 +24,11 @@ __all__ = ["AMBIENT_RADIANCE_W_M2_SR", "SceneSpec", "mirror_shape", "mesh_shape"
 #: 500 lx seen by a camera without filter (the lit calibration images of paper §4.3);
 #: ``dim``: the same room through a ~10 nm band-pass filter at 660 nm (1/50 of it).
 AMBIENT_RADIANCE_W_M2_SR = {"off": 0.0, "dim": 0.02, "bright": 1.0}
+#: How far in front of a laser-side mirror a shadow ray restarts when the laser-side mirrors
+#: are not the scene's (mm): a mirror turned by 0.1° about its line in the sheet lies 1.7 µm
+#: off the scene's within ±1 mm of the sheet (where the light meets it); 10 µm clears that
+#: and moves no shadow test by more than the 1e-4 relative shortening of its segments does.
+LASER_MIRRORS_CLEARANCE_MM = 1e-2
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,6 +47,12 @@ class SceneSpec:
     background_z_mm : float, optional
         Height of a matte black base plate (ρ = 0.04, 400 × 400 mm, facing +Z) that the
         object stands on, like the stage's table; ``None``: no background (black void).
+    laser_mirrors : tuple of Mirror, optional
+        The mirrors the laser light meets (the integrator's method of images), when they are
+        not the rig's (which the camera sees): the twin keeps the reflected sheet in its
+        plane with mirrors turned perpendicular to it (:func:`lts360.twin.rig.laser_side_mirrors`).
+        Each must be within :data:`LASER_MIRRORS_CLEARANCE_MM` of the rig's mirror of the
+        same name where the sheet meets it.  ``None``: the rig's mirrors.
     """
 
     rig: Rig
@@ -49,11 +60,18 @@ class SceneSpec:
     ambient: str = "off"
     background_z_mm: float | None = None
     targets: tuple = ()
+    laser_mirrors: tuple | None = None
 
     def __post_init__(self) -> None:
         if self.ambient not in AMBIENT_RADIANCE_W_M2_SR:
             raise ValueError(f"ambient must be one of {', '.join(AMBIENT_RADIANCE_W_M2_SR)}, "
                              f"got {self.ambient!r}")
+        if self.laser_mirrors is not None:
+            names = sorted(m.name for m in self.laser_mirrors)
+            if names != sorted(m.name for m in self.rig.mirrors):
+                raise ValueError(f"laser_mirrors: must be the rig's mirrors "
+                                 f"{sorted(m.name for m in self.rig.mirrors)}, got {names}")
+            object.__setattr__(self, "laser_mirrors", tuple(self.laser_mirrors))
 
 
 def mirror_shape(m: Mirror) -> dict:

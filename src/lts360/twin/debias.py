@@ -3,7 +3,8 @@ plan, and subtract what the chain does to a profile whose radii are known exactl
 
 For each section: the measured points give a closed profile (:mod:`lts360.twin.profile`); its
 prism is rendered noise-free through the calibrated rig with the rig file's optics
-(:mod:`lts360.twin.rig`), only on the pixels the plan reads; the twin image is measured by the
+(:mod:`lts360.twin.rig`: the camera sees it through the calibrated mirrors, the laser lights
+it through them turned perpendicular to the calibrated sheet), only on the pixels the plan reads; the twin image is measured by the
 very function (same grid, windows, detector, compensation, rejection) that measured the real
 image.  Per view and θ the bias is ``b = r_twin_measured − r_twin_exact`` (the exact radius of
 the prism along the same ray), smoothed along θ over ``smooth_deg`` (the twin's render noise),
@@ -32,9 +33,9 @@ from lts360.recon.calibration.model import Calibration
 from lts360.scenes.materials import get_material
 from lts360.scenes.rig import Rig
 from lts360.twin.profile import axial_form, loft_mesh, ray_radii, section_profile
-from lts360.twin.rig import twin_rig
+from lts360.twin.rig import laser_side_mirrors, twin_rig
 
-__all__ = ["TwinCorrector", "TwinLog", "DEFAULT_TWIN_SPP", "DEFAULT_SMOOTH_DEG", "INPUT_U",
+__all__ = ["TwinCorrector", "TwinLog", "twin_corrected_raw", "DEFAULT_TWIN_SPP", "DEFAULT_SMOOTH_DEG", "INPUT_U",
            "perturbed_design"]
 
 DEFAULT_TWIN_SPP = 64
@@ -57,7 +58,8 @@ TWIN_SEED = 0x7717
 @dataclass
 class TwinLog:
     """What the correction did, one entry per section: per view the mean bias removed (µm),
-    its spread along θ, the corrected and uncorrected point counts and ``u_render_um``."""
+    its spread along θ, the corrected and uncorrected point counts, ``u_render_um`` and the
+    correction itself (``theta_rad``, ``bias_mm``: per corrected point)."""
 
     sections: list = field(default_factory=list)
     render_s: float = 0.0
@@ -109,6 +111,20 @@ def perturbed_design(design: Rig, key: str, u: float) -> Rig:
         return dataclasses.replace(design, laser=dataclasses.replace(
             las, waist_um=w, rayleigh_range_mm=las.rayleigh_range_mm * (1 + u) ** 2))
     raise ValueError(f"unknown twin input {key!r}; known: {', '.join(INPUT_U)}")
+
+
+def _compensated(verts_mm: np.ndarray, cal, name: str, compensate: bool) -> np.ndarray:
+    """The profile ``verts_mm`` (n, 2) as a compensated measurement of view ``name`` reads
+    it: radii ``scale·ρ + radial offset`` along the rays from the origin, then the view's
+    translation (:func:`lts360.recon.triangulation.inverse.compensation_of`)."""
+    from lts360.recon.triangulation.inverse import compensation_of
+
+    kw = compensation_of(cal, name, compensate)
+    if not kw:
+        return verts_mm
+    rho = np.hypot(*verts_mm.T)
+    out = verts_mm * ((kw["scale"] * rho + kw["radial_offset_mm"]) / rho)[:, None]
+    return out + kw.get("offset_mm", np.zeros(2))
 
 
 def _nan_smooth(values: np.ndarray, size: int, wrap: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -224,7 +240,8 @@ class TwinCorrector:
         mesh = (surface if hasattr(surface, "faces")
                 else loft_mesh(surface, half_length_mm=self.half_length_mm))
         spec = SceneSpec(rig, (("object", mesh,
-                                     material_to_bsdf(get_material(self.material))),))
+                                     material_to_bsdf(get_material(self.material))),),
+                         laser_mirrors=laser_side_mirrors(rig))
         res = render_radiance_pixels(spec, pixels_xy, spp=int(self.spp), seed=int(seed),
                                      scale=1.0, max_bounces=2, thin_lens=True, laser_on=True)
         image, _, _ = sensor_image(rig, res, noise="none",
@@ -236,6 +253,8 @@ class TwinCorrector:
         to match: saturation and the detector's threshold then act alike)."""
         full = float(2 ** self.design.sensor.bit_depth - 1)
         vals = np.concatenate([v.intensity[v.valid] for v in result.views.values()])
+        # a compensated view's points moved onto rays whose own peak was elsewhere: NaN there
+        vals = vals[np.isfinite(vals)]
         if vals.size == 0:
             return 0.8
         return float(np.clip(np.percentile(vals, 99.9) / full, 0.05, 1.0))
@@ -329,7 +348,12 @@ class TwinCorrector:
             if tv is None:
                 views[name] = v
                 continue
-            exact = ray_radii(verts, tv.theta_rad, near_mm=tv.r_mm)
+            # A compensated measurement moved the twin's view by its §4.4 offset (and its
+            # mastering) too: the twin is rendered through the very planes it is measured
+            # with, so what corrects those planes' errors in the real image is no bias of its.
+            exact = ray_radii(_compensated(verts, plan.cal, name,
+                                           getattr(twin, "compensated", False)),
+                              tv.theta_rad, near_mm=tv.r_mm)
             b = np.where(tv.valid, tv.r_mm - exact, np.nan)
             b_s, count = _nan_smooth(b, size, wrap)
             ok = v.valid & np.isfinite(b_s)
@@ -341,7 +365,9 @@ class TwinCorrector:
                 "mean_bias_um": float(1e3 * np.mean(b_s[ok])) if ok.any() else 0.0,
                 "bias_range_um": (float(1e3 * np.ptp(b_s[ok])) if ok.any() else 0.0),
                 "n_corrected": int(ok.sum()), "n_uncorrected": int((v.valid & ~ok).sum()),
-                "u_render_um": 1e3 * u if np.isfinite(u) else 0.0}
+                "u_render_um": 1e3 * u if np.isfinite(u) else 0.0,
+                # the correction itself, per corrected point: θ (rad) and the bias removed (mm)
+                "theta_rad": np.asarray(v.theta_rad)[ok], "bias_mm": b_s[ok]}
         return dataclasses.replace(result, views=views)
 
     def _view_bias_um(self, twin, verts) -> dict[str, float]:
@@ -379,3 +405,23 @@ class TwinCorrector:
         self.log.inputs = {name: {"by_input_um": d,
                                   "u_um": float(np.sqrt(sum(v * v for v in d.values())))}
                            for name, d in deltas.items()}
+
+
+def twin_corrected_raw(result, cal: Calibration, grid, twin: TwinCorrector, *,
+                       peak: str = "centroid"):
+    """A round reference's uncompensated measurement ``result`` (on ``grid``) with its
+    line-centre bias removed by ``twin``, returned as raw radii (``r_raw_mm``), for the
+    mastering fit (:func:`lts360.recon.calibration.compensation.master_fit`): the masters then
+    set what the twin leaves, not the bias the twin removes from every later measurement."""
+    from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
+
+    plan = plan_inverse(cal, grid)
+
+    def measure(img):
+        return inverse_triangulate(img, cal, grid, peak=peak, plan=plan)
+
+    fixed = twin(result, measure, plan)
+    views = {n: dataclasses.replace(v, r_raw_mm=np.where(np.isfinite(v.r_mm), v.r_mm,
+                                                         v.r_raw_mm))
+             for n, v in fixed.views.items()}
+    return dataclasses.replace(fixed, views=views)

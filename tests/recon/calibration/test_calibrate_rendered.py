@@ -74,6 +74,12 @@ def test_outputs_are_written_and_loadable(calibrated):
     assert cam["std_method"] == "jackknife over boards"
     assert np.asarray(cam["cov"]).shape == (9, 9) and cam["cov_names"][:4] == ["fx", "fy", "cx", "cy"]
     assert cam["std"]["fx"] > 0 and cam["std_opencv"]["fx"] > 0
+    # the optics it was made with, for the twin: the rig file given and its full TOML
+    from lts360.twin.rig import twin_design
+
+    assert cal.optics["rig"].endswith("half.toml")
+    design = twin_design(cal)
+    assert design.camera.width_px == 640 and design.camera.f_number == 2.8
 
 
 def test_estimates_are_near_the_truth(calibrated):

@@ -10,9 +10,16 @@ has a poorly conditioned centre (with 5 µm point noise the joint fit's offsets 
 into a translation (a view reading 5 µm large gets a ~3.8 µm offset).  On rendered gauges the
 two gave offsets within 10 µm of each other and radius biases within 0.3 µm (STUDIES.md);
 both are available.
+
+Mastering (:func:`master_fit`): the same joint fit with references of known diameter, as
+industrial gauges are mastered.  The known radius makes the size a measured quantity: per view
+a radial offset along the rays (the reference view's too), and with two or more masters of
+different diameters a scale per view; their uncertainty is the fit's and the masters' own.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -20,7 +27,7 @@ from scipy.optimize import least_squares
 from lts360.geometry.fit import fit_circle
 from lts360.recon.triangulation.inverse import raw_view_points
 
-__all__ = ["joint_view_offsets"]
+__all__ = ["joint_view_offsets", "master_fit", "MasterFit", "MIN_MASTER_SPREAD_MM"]
 
 
 def joint_view_offsets(result, *, reference: str = "direct", min_points: int = 10
@@ -77,3 +84,242 @@ def joint_view_offsets(result, *, reference: str = "direct", min_points: int = 1
     sol = least_squares(residual, x0, method="lm", xtol=1e-14, ftol=1e-14)
     t = sol.x[3 * m:].reshape(-1, 2)
     return {n: t[col[n]].copy() for n in others}
+
+
+# -- mastering with references of known diameter --------------------------------------------
+
+#: Two masters closer than this in diameter (mm) do not set a scale (it is then the ratio of
+#: two radial offsets read 0.5 mm apart in radius: ill conditioned).
+MIN_MASTER_SPREAD_MM = 1.0
+#: Mastering drops points whose residual exceeds this many robust σ (1.4826·MAD), refitting
+#: up to :data:`OUTLIER_ROUNDS` times.
+OUTLIER_K = 4.0
+OUTLIER_ROUNDS = 5
+
+
+@dataclass(frozen=True, eq=False)
+class MasterFit:
+    """The joint §4.4 fit with references of known diameter (:func:`master_fit`).
+
+    Each view's raw points are corrected as ``r' = scale·r + radial_offset`` along their ray
+    (radius from the measurement origin, the axis), then a mirror view is translated by its
+    offset (:attr:`Calibration.view_offsets_mm`); the reference view is not translated.
+
+    Attributes
+    ----------
+    offsets_mm : dict str → (2,) float
+        Per mirror view, the translation.
+    radial_offset_mm, scale : dict str → float
+        Per view (the reference view included); ``scale`` 1 with a single master diameter.
+    u_radial_offset_mm, u_scale : dict str → float
+        Standard uncertainties: the fit's (from its residuals) and the masters' diameters'
+        (their ``u``, each master's shots moved together) in quadrature.
+    u_radius_mm : dict str → float
+        Per view, the standard uncertainty of a corrected radius at the masters' mean radius
+        (offset, scale and their correlation, the masters' diameters).
+    u_fit_radial_offset_mm, u_master_radial_offset_mm : dict str → float
+        The two parts of ``u_radial_offset_mm``.
+    diameters_mm, u_diameters_mm : tuple of float
+        The masters (distinct diameters) and their standard uncertainties.
+    shots_per_master : tuple of int
+    rms_mm : float
+        RMS of the fit's residuals (outliers dropped).
+    fitted_scale : bool
+    n_points, n_outliers : int
+        Points fitted, and dropped as outliers.
+    """
+
+    offsets_mm: dict
+    radial_offset_mm: dict
+    scale: dict
+    u_radial_offset_mm: dict
+    u_scale: dict
+    u_radius_mm: dict
+    u_fit_radial_offset_mm: dict
+    u_master_radial_offset_mm: dict
+    diameters_mm: tuple
+    u_diameters_mm: tuple
+    shots_per_master: tuple
+    rms_mm: float
+    fitted_scale: bool
+    n_points: int = 0
+    n_outliers: int = 0
+
+    def to_dict(self) -> dict:
+        """The JSON record stored in ``calibration.json`` (``master``)."""
+        return {"diameters_mm": list(self.diameters_mm),
+                "u_diameters_mm": list(self.u_diameters_mm),
+                "shots_per_master": list(self.shots_per_master),
+                "fitted_scale": self.fitted_scale, "rms_um": 1e3 * self.rms_mm,
+                "n_points": self.n_points, "n_outliers": self.n_outliers,
+                "radial_offset_mm": dict(self.radial_offset_mm), "scale": dict(self.scale),
+                "u_radial_offset_mm": dict(self.u_radial_offset_mm),
+                "u_fit_radial_offset_mm": dict(self.u_fit_radial_offset_mm),
+                "u_master_radial_offset_mm": dict(self.u_master_radial_offset_mm),
+                "u_scale": dict(self.u_scale), "u_radius_mm": dict(self.u_radius_mm)}
+
+
+def _polar_views(points: dict) -> dict:
+    return {n: (np.hypot(*p.T), np.arctan2(p[:, 1], p[:, 0])) for n, p in points.items()}
+
+
+def master_fit(result, diameters_mm, *, u_diameters_mm=None, reference: str = "direct",
+               min_points: int = 10) -> MasterFit:
+    """Mastering: the joint §4.4 fit with round references of known diameter.
+
+    Parameters
+    ----------
+    result : InverseResult or sequence of them
+        Shots of the masters (raw points used, as :func:`joint_view_offsets`).
+    diameters_mm : float or sequence of float, > 0
+        Each shot's master diameter (one value: every shot).
+    u_diameters_mm : float or sequence of float, >= 0, optional
+        The masters' diameters' standard uncertainties (the calibration certificate's),
+        per shot as ``diameters_mm`` (shots of one master must give the same); default 0.
+    reference : str
+        The view whose translation is zero (the circles' centres are free per shot).
+
+    One master diameter: per shot a centre (its radius known), per mirror view a translation,
+    per view (the reference view too) a radial offset.  Two or more distinct diameters (at
+    least :data:`MIN_MASTER_SPREAD_MM` apart): also a scale per view.  Residual: the corrected
+    point's distance from its shot's centre minus the master's radius.
+
+    Raises
+    ------
+    ValueError
+        No shot, a diameter ≤ 0, shots and diameters of different counts, masters of the same
+        nominal diameter with different ``u``, masters less than :data:`MIN_MASTER_SPREAD_MM`
+        apart, too few points in a view.
+    """
+    results = list(result) if isinstance(result, (list, tuple)) else [result]
+    if not results:
+        raise ValueError("master_fit: no shot")
+    m = len(results)
+    D = np.broadcast_to(np.asarray(diameters_mm, float).ravel(), (m,)) \
+        if np.size(diameters_mm) in (1, m) else None
+    if D is None:
+        raise ValueError(f"master_fit: {np.size(diameters_mm)} diameters for {m} shots")
+    if not np.all(np.isfinite(D) & (D > 0)):
+        raise ValueError(f"master diameter: must be > 0, got {D.tolist()}")
+    uD = np.zeros(m) if u_diameters_mm is None else np.broadcast_to(
+        np.asarray(u_diameters_mm, float).ravel(), (m,))
+    if not np.all(np.isfinite(uD) & (uD >= 0)):
+        raise ValueError(f"master diameter u: must be >= 0, got {uD.tolist()}")
+    masters = sorted(set(np.round(D, 9).tolist()))
+    group = np.array([masters.index(round(float(d), 9)) for d in D])
+    u_master = []
+    for g in range(len(masters)):
+        us = set(np.round(uD[group == g], 12).tolist())
+        if len(us) != 1:
+            raise ValueError(f"master Ø{masters[g]:g} mm: its shots give different u {sorted(us)}")
+        u_master.append(us.pop())
+    if len(masters) > 1 and np.min(np.diff(masters)) < MIN_MASTER_SPREAD_MM:
+        raise ValueError(f"masters: diameters {masters} mm are less than "
+                         f"{MIN_MASTER_SPREAD_MM:g} mm apart: they set no scale")
+    fit_scale = len(masters) > 1
+    shots = [raw_view_points(r, reference=reference, min_points=min_points) for r in results]
+    names = list(shots[0])
+    if any(set(s) != set(names) for s in shots[1:]):
+        raise ValueError(f"master_fit: the shots have different views: "
+                         f"{[sorted(s) for s in shots]}")
+    others = [n for n in names if n != reference]
+    col = {n: i for i, n in enumerate(others)}
+    vcol = {n: i for i, n in enumerate(names)}
+    r_l, u_l, shot_l, t_l, v_l = [], [], [], [], []
+    for k, s in enumerate(shots):
+        for n in names:
+            p = s[n]
+            r = np.hypot(*p.T)
+            r_l.append(r)
+            u_l.append(p / r[:, None])
+            shot_l.append(np.full(len(p), k))
+            t_l.append(np.full(len(p), col.get(n, -1)))
+            v_l.append(np.full(len(p), vcol[n]))
+    r0, u0 = np.concatenate(r_l), np.concatenate(u_l)
+    shot, tix, vix = np.concatenate(shot_l), np.concatenate(t_l), np.concatenate(v_l)
+    nv, no = len(names), len(others)
+
+    def unpack(x):
+        c = x[:2 * m].reshape(m, 2)
+        t = x[2 * m:2 * m + 2 * no].reshape(no, 2)
+        dr = x[2 * m + 2 * no:2 * m + 2 * no + nv]
+        ds = x[2 * m + 2 * no + nv:] if fit_scale else np.zeros(nv)
+        return c, t, dr, ds
+
+    keep = np.ones(r0.size, bool)
+
+    def make_residual(R, sel=None):
+        def residual(x):
+            c, t, dr, ds = unpack(x)
+            rr = (1.0 + ds[vix]) * r0 + dr[vix]
+            shift = np.where(tix[:, None] >= 0, t[np.maximum(tix, 0)], 0.0)
+            q = rr[:, None] * u0 + shift - c[shot]
+            res = np.hypot(*q.T) - R[shot]
+            return res if sel is None else res[sel]
+        return residual
+
+    R = 0.5 * D
+    starts = [fit_circle(np.concatenate(list(s.values()))) for s in shots]
+    x0 = np.concatenate([np.concatenate([f.center_mm for f in starts]), np.zeros(2 * no),
+                         np.array([np.mean([R[k] - f.radius_mm for k, f in enumerate(starts)])]
+                                  * nv), np.zeros(nv if fit_scale else 0)])
+
+    def solve(Rk, x_start):
+        return least_squares(make_residual(Rk, keep), x_start, method="lm", xtol=1e-15,
+                             ftol=1e-15, gtol=1e-15)
+
+    # Outliers (a stray peak in the reference's band) are dropped: beyond OUTLIER_K robust σ
+    # of the residuals, refitted until none is left (at most OUTLIER_ROUNDS times).
+    sol = solve(R, x0)
+    for _ in range(OUTLIER_ROUNDS):
+        res = make_residual(R)(sol.x)
+        sigma = 1.4826 * np.median(np.abs(res[keep]))
+        new = np.abs(res) <= OUTLIER_K * max(sigma, 1e-9)
+        if np.array_equal(new, keep):
+            break
+        keep = new
+        if np.bincount(vix[keep], minlength=nv).min() < min_points:
+            raise ValueError("master_fit: too few points left in a view after dropping "
+                             "outliers")
+        sol = solve(R, sol.x)
+    n_par = sol.x.size
+    dof = max(sol.fun.size - n_par, 1)
+    s2 = float(sol.fun @ sol.fun) / dof
+    J = sol.jac
+    cov = s2 * np.linalg.pinv(J.T @ J)
+    # the masters' diameters: each master's shots moved together by its u (type B)
+    moves = []
+    for g, u in enumerate(u_master):
+        if u > 0:
+            Rg = R + np.where(group == g, 0.5 * u, 0.0)
+            moves.append(solve(Rg, sol.x).x - sol.x)
+    c, t, dr, ds = unpack(sol.x)
+    i_dr = 2 * m + 2 * no
+    i_ds = i_dr + nv
+    r_mean = float(np.mean(0.5 * np.asarray(masters)))
+    out = {k: {} for k in ("dr", "s", "u_dr", "u_s", "u_r", "u_fit", "u_master")}
+    for n, j in vcol.items():
+        idx = [i_dr + j] + ([i_ds + j] if fit_scale else [])
+        g = np.array([1.0, r_mean][:len(idx)])  # d(radius at r_mean)/d(dr, ds)
+        C = cov[np.ix_(idx, idx)]
+        u_fit_r = float(np.sqrt(g @ C @ g))
+        u_mst_r = float(np.sqrt(sum((g @ mv[idx]) ** 2 for mv in moves)))
+        out["dr"][n] = float(dr[j])
+        out["s"][n] = float(1.0 + ds[j])
+        out["u_fit"][n] = float(np.sqrt(cov[i_dr + j, i_dr + j]))
+        out["u_master"][n] = float(np.sqrt(sum(mv[i_dr + j] ** 2 for mv in moves)))
+        out["u_dr"][n] = float(np.hypot(out["u_fit"][n], out["u_master"][n]))
+        out["u_s"][n] = float(np.sqrt(cov[i_ds + j, i_ds + j] + sum(mv[i_ds + j] ** 2
+                                                                    for mv in moves))) \
+            if fit_scale else 0.0
+        out["u_r"][n] = float(np.hypot(u_fit_r, u_mst_r))
+    return MasterFit(offsets_mm={n: t[col[n]].copy() for n in others},
+                     radial_offset_mm=out["dr"], scale=out["s"], u_radial_offset_mm=out["u_dr"],
+                     u_scale=out["u_s"], u_radius_mm=out["u_r"],
+                     u_fit_radial_offset_mm=out["u_fit"],
+                     u_master_radial_offset_mm=out["u_master"],
+                     diameters_mm=tuple(float(v) for v in masters),
+                     u_diameters_mm=tuple(float(v) for v in u_master),
+                     shots_per_master=tuple(int(np.sum(group == g)) for g in range(len(masters))),
+                     rms_mm=float(np.sqrt(np.mean(sol.fun ** 2))), fitted_scale=fit_scale,
+                     n_points=int(keep.sum()), n_outliers=int((~keep).sum()))

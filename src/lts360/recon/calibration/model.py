@@ -151,6 +151,17 @@ class Calibration:
         ``"left-right"``).  Every mirror is present after construction (zeros by default).
     uncertainty : dict
         Free-form (JSON-serialisable) uncertainty information, e.g. covariances; not used yet.
+    view_radial_offsets_mm, view_scales : mapping str → float
+        Mastering (references of known diameter, :func:`lts360.recon.calibration.compensation.
+        master_fit`): per view (``"direct"`` too) its radii become ``scale·r + offset`` along
+        their rays before the view's translation; absent views: 0 and 1.
+    master : dict
+        The mastering's record (masters, shots, fit, uncertainties), empty without one.
+    optics : dict
+        The optics the calibration was made with, for the line-centre bias twin (recon does
+        not read it): ``rig`` (the preset name or rig file given) and ``rig_toml`` (that rig's
+        full TOML: design, lens, sheet, sensor).  Empty for a calibration that does not know
+        (an older file).
     """
 
     image_size: tuple[int, int]
@@ -161,6 +172,10 @@ class Calibration:
     T_cam_meas: np.ndarray
     view_offsets_mm: Mapping[str, np.ndarray] = field(default_factory=dict)
     uncertainty: dict = field(default_factory=dict)
+    optics: dict = field(default_factory=dict)
+    view_radial_offsets_mm: Mapping[str, float] = field(default_factory=dict)
+    view_scales: Mapping[str, float] = field(default_factory=dict)
+    master: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         size = self.image_size
@@ -230,6 +245,33 @@ class Calibration:
             object.__setattr__(self, "uncertainty", {})
         if not isinstance(self.uncertainty, dict):
             raise ValueError("uncertainty: must be a dict")
+        for attr, lo, hi in (("view_radial_offsets_mm", -1.0, 1.0), ("view_scales", 0.9, 1.1)):
+            value = getattr(self, attr)
+            if not isinstance(value, Mapping):
+                raise ValueError(f"{attr}: must be a mapping view name -> number")
+            clean = {}
+            for key, v in value.items():
+                parts = str(key).split("-")
+                if key != "direct" and not all(p in names for p in parts):
+                    raise ValueError(f"{attr}: {key!r} is not a view of this calibration "
+                                     f"(direct, mirrors {names})")
+                v = float(_finite_array(v, (), f"{attr}[{key}]"))
+                if not lo <= v <= hi:
+                    raise ValueError(f"{attr}[{key}]: must be in [{lo:g}, {hi:g}], got {v}")
+                clean[str(key)] = v
+            object.__setattr__(self, attr, clean)
+        if self.master is None:
+            object.__setattr__(self, "master", {})
+        if not isinstance(self.master, dict):
+            raise ValueError("master: must be a dict")
+        if self.optics is None:
+            object.__setattr__(self, "optics", {})
+        if not isinstance(self.optics, dict):
+            raise ValueError("optics: must be a JSON object {rig, rig_toml}")
+        for key in ("rig", "rig_toml"):
+            if key in self.optics and not (isinstance(self.optics[key], str)
+                                           and self.optics[key]):
+                raise ValueError(f"optics.{key}: must be a non-empty string")
 
     # -- convenience -------------------------------------------------------------------------
     @property
@@ -329,6 +371,10 @@ def calibration_to_dict(cal: Calibration) -> dict:
         "T_cam_meas": cal.T_cam_meas.tolist(),
         "view_offsets_mm": {k: v.tolist() for k, v in cal.view_offsets_mm.items()},
         "uncertainty": cal.uncertainty,
+        "view_radial_offsets_mm": dict(cal.view_radial_offsets_mm),
+        "view_scales": dict(cal.view_scales),
+        "master": cal.master,
+        "optics": cal.optics,
     }
 
 
@@ -360,9 +406,14 @@ def calibration_from_dict(data: Mapping) -> Calibration:
     T = _opencv_matrix(_require(data, "T_cam_meas"), "T_cam_meas")
     offsets = data.get("view_offsets_mm") or {}
     uncertainty = data.get("uncertainty") or {}
+    # absent in files older than the optics record and the mastering
+    optics = data.get("optics") or {}
     return Calibration(image_size=(w, h), K=K, dist=dist, mirrors=tuple(mirrors),
                        laser_plane=laser_plane, T_cam_meas=T, view_offsets_mm=offsets,
-                       uncertainty=uncertainty)
+                       uncertainty=uncertainty, optics=optics,
+                       view_radial_offsets_mm=data.get("view_radial_offsets_mm") or {},
+                       view_scales=data.get("view_scales") or {},
+                       master=data.get("master") or {})
 
 
 def shift_origin(cal: Calibration, xy_mm) -> Calibration:
@@ -420,9 +471,12 @@ def calibration_from_frame_truth(data: Mapping) -> Calibration:
         raise ValueError(f"laser.plane: the sheet must be roughly perpendicular to the world Z "
                          f"axis (the object axis), got n={n_l.tolist()}")
     T_world_meas = make_T_cam_meas((n_l, d_l), (0.0, 0.0, d_l / n_l[2]), (1.0, 0.0, 0.0))
+    rig = data.get("rig")  # the frame's rig (frames written before it was recorded: none)
+    optics = ({k: rig[k] for k in ("rig", "rig_toml") if isinstance(rig.get(k), str)}
+              if isinstance(rig, Mapping) else {})
     return Calibration(image_size=(int(size[0]), int(size[1])), K=K, dist=dist,
                        mirrors=tuple(mirrors), laser_plane=transform_plane(n_l, d_l, R, t),
-                       T_cam_meas=T_cam_world @ T_world_meas)
+                       T_cam_meas=T_cam_world @ T_world_meas, optics=optics)
 
 
 def load_calibration(path) -> Calibration:

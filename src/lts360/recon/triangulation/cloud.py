@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["VIEW_CODES", "VIEW_NAMES", "Cloud", "write_cloud", "read_cloud",
-           "read_cloud_rejections", "read_cloud_twin"]
+           "read_cloud_rejections", "read_cloud_twin", "read_cloud_master"]
 
 VIEW_CODES = {"direct": 0, "left": 1, "right": 2, "left-right": 3, "right-left": 4, "fused": 9}
 VIEW_NAMES = {v: k for k, v in VIEW_CODES.items()}
@@ -157,6 +157,19 @@ def read_cloud_twin(path) -> dict[str, dict[str, float]]:
         if len(w) >= 1 and len(w) % 2 == 1:
             try:
                 out[w[0]] = {k: float(v) for k, v in zip(w[1::2], w[2::2])}
+            except ValueError:
+                continue
+    return out
+
+
+def read_cloud_master(path) -> dict[str, float]:
+    """The mastering a cloud was compensated with, per view: ``u_radius_um`` (``{}``
+    without one)."""
+    out = {}
+    for w in _lts360_comments(path, "master"):
+        if len(w) == 3 and w[1] == "u_radius_um":
+            try:
+                out[w[0]] = float(w[2])
             except ValueError:
                 continue
     return out

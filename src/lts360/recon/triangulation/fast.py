@@ -44,7 +44,7 @@ import numpy as np
 
 from lts360.recon.triangulation.interp import prefilter
 from lts360.recon.triangulation.inverse import (DEFAULT_ACCEPT, InversePlan, InverseResult, assemble_view,
-                                  default_saturation, default_threshold)
+                                  compensation_of, default_saturation, default_threshold)
 from lts360.recon.triangulation.peaks import (DEFAULT_MAX_PLATEAU_MM, DEFAULT_SECOND_PEAK_FRACTION,
                                               PeakResult, Quality, plateau_samples)
 
@@ -357,13 +357,8 @@ class FastInverse:
         peaks = self.peaks(img, threshold=thr, saturation=sat)
         cal = self.plan.cal
 
-        def offset(name):
-            if compensate and name != "direct":
-                return np.asarray(cal.view_offsets_mm.get(name, np.zeros(2)), dtype=float)
-            return np.zeros(2)
-
         views = {name: assemble_view(self.plan.views[name], self.plan.grid, pk, accept=accept,
-                                     offset_mm=offset(name))
+                                     **compensation_of(cal, name, compensate))
                  for name, pk in peaks.items()}
         return InverseResult(grid=self.plan.grid, views=views, peak="centroid", threshold=thr,
                              saturation=sat, compensated=bool(compensate),

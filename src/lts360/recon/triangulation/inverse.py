@@ -40,7 +40,7 @@ from lts360.recon.triangulation.views import (DEFAULT_MAX_INCIDENCE_DEG, DIRECT,
                                               view_windows)
 
 __all__ = ["ViewPlan", "InversePlan", "ViewResult", "FusedCloud", "InverseResult", "raw_view_points",
-           "plan_inverse", "plan_pixels", "project_grid", "sample_profiles", "assemble_view",
+           "plan_inverse", "plan_pixels", "project_grid", "sample_profiles", "assemble_view", "compensation_of",
            "inverse_triangulate", "estimate_view_offsets", "default_threshold",
            "default_saturation", "DEFAULT_ACCEPT", "DEFAULT_THRESHOLD_FRACTION"]
 
@@ -371,8 +371,22 @@ def _shift_on_rays(theta: np.ndarray, r: np.ndarray, offset: np.ndarray,
     return np.where(hit[rows, first], s[rows, first], np.nan)
 
 
+def compensation_of(cal: Calibration, name: str, compensate: bool) -> dict:
+    """:func:`assemble_view`'s compensation keywords for view ``name``: the §4.4 translation
+    (mirror views) and the mastering's radial offset and scale (every view); none unless
+    ``compensate``."""
+    if not compensate:
+        return {}
+    out = {"radial_offset_mm": float(cal.view_radial_offsets_mm.get(name, 0.0)),
+           "scale": float(cal.view_scales.get(name, 1.0))}
+    if name != DIRECT:
+        out["offset_mm"] = np.asarray(cal.view_offsets_mm.get(name, np.zeros(2)), dtype=float)
+    return out
+
+
 def assemble_view(view_plan: ViewPlan, grid: CylGrid, peaks: PeakResult, *,
-                  accept=DEFAULT_ACCEPT, offset_mm=(0.0, 0.0)) -> ViewResult:
+                  accept=DEFAULT_ACCEPT, offset_mm=(0.0, 0.0), radial_offset_mm: float = 0.0,
+                  scale: float = 1.0) -> ViewResult:
     """Scatter a view's peaks onto the grid's θ, filter by quality, apply a compensation offset.
 
     Parameters
@@ -386,6 +400,9 @@ def assemble_view(view_plan: ViewPlan, grid: CylGrid, peaks: PeakResult, *,
     offset_mm : (2,) float
         Translation (measurement frame) of this view's points (paper §4.4); the compensated
         curve is re-sampled on the grid rays (:func:`_shift_on_rays`).
+    radial_offset_mm, scale : float
+        Mastering (``Calibration.view_radial_offsets_mm``, ``view_scales``): the radii become
+        ``scale·r + radial_offset_mm`` before the translation.
     """
     n = grid.n_theta
     idx = view_plan.theta_index
@@ -397,6 +414,8 @@ def assemble_view(view_plan: ViewPlan, grid: CylGrid, peaks: PeakResult, *,
     intensity[idx] = peaks.intensity
     keep = np.isin(quality, np.asarray([int(q) for q in accept], dtype=np.uint8))
     r = np.where(keep, r_raw, np.nan)
+    if radial_offset_mm != 0.0 or scale != 1.0:
+        r = float(scale) * r + float(radial_offset_mm)
     offset = np.asarray(offset_mm, dtype=float).reshape(2)
     r = _shift_on_rays(grid.theta_rad, r, offset, grid.is_full_turn)
     return ViewResult(name=view_plan.view.name, theta_rad=grid.theta_rad, r_mm=r, r_raw_mm=r_raw,
@@ -570,9 +589,8 @@ def inverse_triangulate(image, cal: Calibration, grid: CylGrid, *, views=None, w
     for name, vp in plan.views.items():
         profiles = sample_profiles(img, vp)
         peaks = detect_peaks(peak, profiles, grid.r_mm, threshold=thr, saturation=sat, **options)
-        offset = cal.view_offsets_mm.get(name, np.zeros(2)) if compensate and name != DIRECT \
-            else np.zeros(2)
-        results[name] = assemble_view(vp, grid, peaks, accept=accept, offset_mm=offset)
+        results[name] = assemble_view(vp, grid, peaks, accept=accept,
+                                      **compensation_of(cal, name, compensate))
     return InverseResult(grid=grid, views=results, peak=peak, threshold=thr, saturation=sat,
                          compensated=bool(compensate), accept=tuple(Quality(q) for q in accept))
 
