@@ -22,12 +22,16 @@ from lts360.simulator.io import rig_truth, write_exr, write_json, write_png
 from lts360.simulator.render import RenderResult, render_radiance, render_radiance_pixels
 from lts360.simulator.scene import SceneSpec
 from lts360.simulator.materials import material_to_bsdf
+from lts360.simulator.support import SUPPORT_METHODS, PixelSupport
 
-__all__ = ["DEFAULT_SPP", "NOISE_MODES", "Frame", "simulate_frame", "write_frame", "stage_transform",
-           "sensor_image"]
+__all__ = ["DEFAULT_SPP", "NOISE_MODES", "AMBIENT_SPP", "Frame", "simulate_frame", "render_frame",
+           "write_frame", "stage_transform", "sensor_image"]
 
 DEFAULT_SPP = 16
 NOISE_MODES = ("none", "realistic")
+#: Samples per pixel of the ambient-only full-frame render that fills the pixels outside the
+#: laser's support when ambient light is on (ambient light varies slowly over the image).
+AMBIENT_SPP = 4
 
 
 def stage_transform(z_mm: float) -> np.ndarray:
@@ -56,7 +60,7 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
                    thin_lens: bool = True, exposure_time_s: float | None = None,
                    speckle_seed: int | None = None, background_z_mm: float | None = None,
                    exposure_fraction: float = 0.8, extra_meshes: tuple = (),
-                   pixels_xy: np.ndarray | None = None) -> Frame:
+                   pixels_xy: np.ndarray | None = None, support: str = "geometric") -> Frame:
     """Render one frame of ``obj`` in ``rig`` at stage height ``z_mm``.
 
     Parameters
@@ -81,6 +85,17 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
         offset and noise).  For a study that reads a band the calibration predicts: the
         pixels it reads have the statistics of a full render's (another noise realisation),
         at the cost of the pixels listed.  ``truth["render"]["pixels"]`` counts them.
+        Overrides ``support``.
+    support : {"geometric", "pilot", "full"}
+        Which pixels are rendered at ``spp`` (:mod:`lts360.simulator.support`).
+        ``geometric`` (default): every pixel that can hold direct laser light, from the scene's
+        geometry (the sheet's slab on every shape, seen through every view, widened by the
+        defocus blur); ``pilot``: the pixels a low-spp full render of the same integrator
+        lights (for light the geometry does not bound, e.g. interreflections); ``full``:
+        every pixel (the render before supports; ``lts360 render --full-frame``).  Outside the
+        support a pixel holds no laser light: with ambient light off it gets none, with it on
+        the ambient radiance of one full-frame ambient-only render at :data:`AMBIENT_SPP`.
+        ``truth["render"]["support"]`` records the method and the pixel count.
     """
     if noise not in NOISE_MODES:
         raise ValueError(f"noise must be one of {', '.join(NOISE_MODES)}, got {noise!r}")
@@ -89,10 +104,9 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
     mesh.apply_transform(T_stage)
     meshes = (("object", mesh, material_to_bsdf(obj.material)),) + tuple(extra_meshes)
     spec = SceneSpec(rig, meshes, ambient=ambient, background_z_mm=background_z_mm)
-    kw = dict(spp=spp, seed=seed, scale=scale, max_bounces=max_bounces, thin_lens=thin_lens,
-              laser_on=laser_on)
-    res = (render_radiance(spec, **kw) if pixels_xy is None
-           else render_radiance_pixels(spec, pixels_xy, **kw))
+    res, sup = render_frame(spec, spp=spp, seed=seed, scale=scale, max_bounces=max_bounces,
+                            thin_lens=thin_lens, laser_on=laser_on, pixels_xy=pixels_xy,
+                            support=support)
     image, exposure_time_s, magnification = sensor_image(
         rig, res, noise=noise, seed=seed, speckle_seed=speckle_seed, scale=scale,
         exposure_time_s=exposure_time_s, exposure_fraction=exposure_fraction)
@@ -108,13 +122,66 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
                    "max_bounces": max_bounces, "thin_lens": thin_lens, "laser_on": laser_on,
                    "ambient": ambient, "background_z_mm": background_z_mm,
                    "seconds": res.seconds,
-                   "pixels": None if pixels_xy is None else int(len(pixels_xy))},
+                   "pixels": None if pixels_xy is None else int(len(pixels_xy)),
+                   "support": sup.to_dict() if sup is not None else None},
         "sensor": {"noise": noise, "exposure_time_s": float(exposure_time_s),
                    "speckle_seed": speckle_seed, "magnification": magnification,
                    "bit_depth": sens.bit_depth, "model": sens.to_dict()},
     })
     return Frame(image=image, render=res, exposure_time_s=float(exposure_time_s), truth=truth,
                  mesh_world=mesh)
+
+
+def render_frame(spec: SceneSpec, *, spp: int, seed: int, scale: float = 1.0, max_bounces: int = 2,
+                 thin_lens: bool = True, laser_on: bool = True, pixels_xy=None,
+                 support: str = "geometric", prepared=None
+                 ) -> tuple[RenderResult, PixelSupport | None]:
+    """The radiance of a frame, rendered on its pixel support (``simulate_frame``'s render).
+
+    Returns the full-size :class:`RenderResult` (``seconds``: the whole call, support and
+    ambient included) and the support used (``None`` when ``pixels_xy`` was given).
+    ``prepared`` (scene, integrator) from :func:`lts360.simulator.render.prepare_scene` with
+    the same arguments renders a scene built once (:class:`lts360.simulator.reuse.SceneCache`).
+    """
+    import time
+
+    from lts360.simulator import support as support_mod
+    from lts360.simulator.render import render_pixels, require_variant
+
+    if support not in SUPPORT_METHODS:
+        raise ValueError(f"support must be one of {', '.join(SUPPORT_METHODS)}, got {support!r}")
+    kw = dict(spp=spp, seed=seed, scale=scale, max_bounces=max_bounces, thin_lens=thin_lens,
+              laser_on=laser_on)
+    if pixels_xy is not None:
+        return render_radiance_pixels(spec, pixels_xy, prepared=prepared, **kw), None
+    if support == "full" and prepared is None:
+        res = render_radiance(spec, **kw)
+        return res, support_mod.full_support(spec.rig.camera, scale)
+    t0 = time.perf_counter()
+    geo = dict(scale=scale, max_bounces=max_bounces, thin_lens=thin_lens)
+    if support == "geometric":
+        sup = support_mod.geometric_support(spec, **geo)
+    elif support == "pilot":
+        sup = support_mod.pilot_support(spec, seed=seed, prepared=prepared, **geo)
+    else:
+        sup = support_mod.full_support(spec.rig.camera, scale)
+    h, w = sup.mask.shape
+    radiance = np.zeros((h, w), np.float32)
+    laser = np.zeros((h, w), np.float32)
+    if spec.ambient != "off" and sup.method != "full":
+        amb = render_radiance(spec, spp=AMBIENT_SPP, seed=seed, scale=scale,
+                              max_bounces=max_bounces, thin_lens=thin_lens, laser_on=False)
+        radiance[:] = amb.radiance_W_m2_sr
+    px = sup.pixels_xy
+    rad, las, _ = render_pixels(spec, px, prepared=prepared, **kw)
+    radiance[px[:, 1], px[:, 0]] = rad
+    laser[px[:, 1], px[:, 0]] = las
+    from lts360.geometry.camera import scale_intrinsics
+
+    res = RenderResult(radiance_W_m2_sr=radiance, laser_W_m2_sr=laser,
+                       K=scale_intrinsics(spec.rig.camera.K, scale), variant=require_variant(),
+                       spp=spp, seed=seed, seconds=time.perf_counter() - t0)
+    return res, sup
 
 
 def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int = 0,
