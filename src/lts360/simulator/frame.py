@@ -216,7 +216,7 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
         Lateral magnification at the focus distance (the working f-number is N (1 + m)).
     """
     from lts360.simulator import sensor as sensor_mod
-    from lts360.simulator.speckle import speckle_pattern
+    from lts360.simulator.speckle import speckle_on_tiles
 
     if noise not in NOISE_MODES:
         raise ValueError(f"noise must be one of {', '.join(NOISE_MODES)}, got {noise!r}")
@@ -231,18 +231,13 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
     laser = res.laser_W_m2_sr
     if speckle is None:
         speckle = noise == "realistic"
-    lit_rows = np.flatnonzero(laser.any(axis=1))
-    if speckle and lit_rows.size:
-        # Speckle is stationary: draw it on the laser-lit bounding box only (plus a margin so
-        # the field's FFT filtering sees no edge), which is a fraction of the frame.
-        lit_cols = np.flatnonzero(laser.any(axis=0))
-        pad = 16
-        r0, r1 = max(0, lit_rows[0] - pad), min(laser.shape[0], lit_rows[-1] + pad + 1)
-        c0, c1 = max(0, lit_cols[0] - pad), min(laser.shape[1], lit_cols[-1] + pad + 1)
-        pattern = speckle_pattern((r1 - r0, c1 - c0), pixel_pitch_um=pitch_um,
-                                  wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
-                                  magnification=magnification, rng=np.random.default_rng(seeds[0]))
-        radiance[r0:r1, c0:c1] += laser[r0:r1, c0:c1] * (pattern - 1.0)
+    if speckle and laser.any():
+        # Speckle is stationary: draw it only on the image tiles that hold laser light.
+        pattern = speckle_on_tiles(laser > 0, pixel_pitch_um=pitch_um,
+                                   wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
+                                   magnification=magnification,
+                                   rng=np.random.default_rng(seeds[0]))
+        radiance += laser * (pattern - 1.0)
     if exposure_time_s is None:
         lit = laser > 0
         exposure_time_s = sensor_mod.auto_exposure(

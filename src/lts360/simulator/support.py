@@ -323,8 +323,14 @@ def geometric_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_le
         return PixelSupport(mask=mask, method="geometric", margin_px=float(margin_px))
     # Sample spacing: SAMPLE_SPACING_PX at the nearest depth of a clipped vertex in any view.
     maps = [_compose(rig.mirrors, s) for s in _sequences(rig, max_bounces)]
+    # Depth is affine in the point: its minimum over the clipped triangles' bounding box is
+    # at a corner, and bounds theirs from below (finer spacing, never coarser).
     tv = tris.reshape(-1, 3)
-    zmin = min(_depth_range(tv @ A.T + b, cam)[0] for A, b in maps)
+    box = np.array(np.meshgrid(*zip(tv.min(axis=0), tv.max(axis=0)))).reshape(3, -1).T
+    zmin = min(_depth_range(box @ A.T + b, cam)[0] for A, b in maps)
+    if not (math.isfinite(zmin) and all(np.all(world_to_camera(box @ A.T + b, cam.R, cam.t_mm)
+                                                [:, 2] > 1e-6) for A, b in maps)):
+        zmin = min(_depth_range(tv @ A.T + b, cam)[0] for A, b in maps)
     if not math.isfinite(zmin):
         return PixelSupport(mask=mask, method="geometric", margin_px=float(margin_px))
     pts = slab_points(tris, step_mm=SAMPLE_SPACING_PX * zmin / K[0, 0])
