@@ -60,7 +60,8 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
                    thin_lens: bool = True, exposure_time_s: float | None = None,
                    speckle_seed: int | None = None, background_z_mm: float | None = None,
                    exposure_fraction: float = 0.8, extra_meshes: tuple = (),
-                   pixels_xy: np.ndarray | None = None, support: str = "geometric") -> Frame:
+                   pixels_xy: np.ndarray | None = None, support: str = "geometric",
+                   scenes=None) -> Frame:
     """Render one frame of ``obj`` in ``rig`` at stage height ``z_mm``.
 
     Parameters
@@ -96,6 +97,9 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
         support a pixel holds no laser light: with ambient light off it gets none, with it on
         the ambient radiance of one full-frame ambient-only render at :data:`AMBIENT_SPP`.
         ``truth["render"]["support"]`` records the method and the pixel count.
+    scenes : lts360.simulator.reuse.SceneCache, optional
+        Build once, render many: a loop passes one cache to all its frames, and a frame
+        whose shapes only moved reuses the loaded scene (same image as a fresh load).
     """
     if noise not in NOISE_MODES:
         raise ValueError(f"noise must be one of {', '.join(NOISE_MODES)}, got {noise!r}")
@@ -106,7 +110,7 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
     spec = SceneSpec(rig, meshes, ambient=ambient, background_z_mm=background_z_mm)
     res, sup = render_frame(spec, spp=spp, seed=seed, scale=scale, max_bounces=max_bounces,
                             thin_lens=thin_lens, laser_on=laser_on, pixels_xy=pixels_xy,
-                            support=support)
+                            support=support, scenes=scenes)
     image, exposure_time_s, magnification = sensor_image(
         rig, res, noise=noise, seed=seed, speckle_seed=speckle_seed, scale=scale,
         exposure_time_s=exposure_time_s, exposure_fraction=exposure_fraction)
@@ -123,7 +127,7 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
                    "ambient": ambient, "background_z_mm": background_z_mm,
                    "seconds": res.seconds,
                    "pixels": None if pixels_xy is None else int(len(pixels_xy)),
-                   "support": sup.to_dict() if sup is not None else None},
+                   "support": sup.to_dict()},
         "sensor": {"noise": noise, "exposure_time_s": float(exposure_time_s),
                    "speckle_seed": speckle_seed, "magnification": magnification,
                    "bit_depth": sens.bit_depth, "model": sens.to_dict()},
@@ -134,30 +138,48 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
 
 def render_frame(spec: SceneSpec, *, spp: int, seed: int, scale: float = 1.0, max_bounces: int = 2,
                  thin_lens: bool = True, laser_on: bool = True, pixels_xy=None,
-                 support: str = "geometric", prepared=None
-                 ) -> tuple[RenderResult, PixelSupport | None]:
+                 support: str = "geometric", scenes=None
+                 ) -> tuple[RenderResult, PixelSupport]:
     """The radiance of a frame, rendered on its pixel support (``simulate_frame``'s render).
 
-    Returns the full-size :class:`RenderResult` (``seconds``: the whole call, support and
-    ambient included) and the support used (``None`` when ``pixels_xy`` was given).
-    ``prepared`` (scene, integrator) from :func:`lts360.simulator.render.prepare_scene` with
-    the same arguments renders a scene built once (:class:`lts360.simulator.reuse.SceneCache`).
+    Parameters
+    ----------
+    spec : SceneSpec
+    spp, seed, scale, max_bounces, thin_lens, laser_on
+        As :func:`lts360.simulator.render.render_radiance`.
+    pixels_xy : (n, 2) int, optional
+        A window: only its pixels may be rendered (those of the support among them); the
+        rest of the frame is 0.
+    support : {"geometric", "pilot", "full"}
+        See :func:`simulate_frame`.
+    scenes : lts360.simulator.reuse.SceneCache, optional
+        Scenes built once for a loop: the scene is reused (vertices moved) when it can be.
+
+    Returns
+    -------
+    RenderResult
+        Full size; ``seconds`` is the whole call (support and ambient render included).
+    PixelSupport
+        The pixels rendered at ``spp`` (``method`` ``"window"`` when ``pixels_xy`` was given
+        with ``support="full"``).
     """
     import time
 
+    from lts360.geometry.camera import scale_intrinsics
     from lts360.simulator import support as support_mod
     from lts360.simulator.render import render_pixels, require_variant
 
     if support not in SUPPORT_METHODS:
         raise ValueError(f"support must be one of {', '.join(SUPPORT_METHODS)}, got {support!r}")
-    kw = dict(spp=spp, seed=seed, scale=scale, max_bounces=max_bounces, thin_lens=thin_lens,
-              laser_on=laser_on)
-    if pixels_xy is not None:
-        return render_radiance_pixels(spec, pixels_xy, prepared=prepared, **kw), None
-    if support == "full" and prepared is None:
-        res = render_radiance(spec, **kw)
-        return res, support_mod.full_support(spec.rig.camera, scale)
     t0 = time.perf_counter()
+    if not laser_on:  # no laser light: every pixel holds only what the whole image holds
+        support = "full"
+    kw = dict(spp=spp, scale=scale, max_bounces=max_bounces, thin_lens=thin_lens,
+              laser_on=laser_on)
+    w, h = support_mod.film_size(spec.rig.camera, scale)
+    if support == "full" and pixels_xy is None and scenes is None:
+        return render_radiance(spec, seed=seed, **kw), support_mod.full_support(spec.rig.camera, scale)
+    prepared = scenes.prepare(spec, **kw) if scenes is not None else None
     geo = dict(scale=scale, max_bounces=max_bounces, thin_lens=thin_lens)
     if support == "geometric":
         sup = support_mod.geometric_support(spec, **geo)
@@ -165,19 +187,26 @@ def render_frame(spec: SceneSpec, *, spp: int, seed: int, scale: float = 1.0, ma
         sup = support_mod.pilot_support(spec, seed=seed, prepared=prepared, **geo)
     else:
         sup = support_mod.full_support(spec.rig.camera, scale)
-    h, w = sup.mask.shape
+    window = None
+    if pixels_xy is not None:
+        px = np.asarray(pixels_xy, dtype=np.int64).reshape(-1, 2)
+        if len(px) and (px.min() < 0 or np.any(px.max(axis=0) >= (w, h))):
+            raise ValueError(f"pixels_xy must lie inside the {w} x {h} film")
+        window = np.zeros((h, w), bool)
+        window[px[:, 1], px[:, 0]] = True
+        sup = PixelSupport(mask=sup.mask & window,
+                           method=sup.method if sup.method != "full" else "window",
+                           margin_px=sup.margin_px)
     radiance = np.zeros((h, w), np.float32)
     laser = np.zeros((h, w), np.float32)
-    if spec.ambient != "off" and sup.method != "full":
+    if spec.ambient != "off" and sup.method not in ("full", "window"):
         amb = render_radiance(spec, spp=AMBIENT_SPP, seed=seed, scale=scale,
                               max_bounces=max_bounces, thin_lens=thin_lens, laser_on=False)
-        radiance[:] = amb.radiance_W_m2_sr
+        radiance[:] = amb.radiance_W_m2_sr if window is None else amb.radiance_W_m2_sr * window
     px = sup.pixels_xy
-    rad, las, _ = render_pixels(spec, px, prepared=prepared, **kw)
+    rad, las, _ = render_pixels(spec, px, seed=seed, prepared=prepared, **kw)
     radiance[px[:, 1], px[:, 0]] = rad
     laser[px[:, 1], px[:, 0]] = las
-    from lts360.geometry.camera import scale_intrinsics
-
     res = RenderResult(radiance_W_m2_sr=radiance, laser_W_m2_sr=laser,
                        K=scale_intrinsics(spec.rig.camera.K, scale), variant=require_variant(),
                        spp=spp, seed=seed, seconds=time.perf_counter() - t0)
