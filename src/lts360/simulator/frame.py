@@ -181,12 +181,15 @@ def render_frame(spec: SceneSpec, *, spp: int, seed: int, scale: float = 1.0, ma
         return render_radiance(spec, seed=seed, **kw), support_mod.full_support(spec.rig.camera, scale)
     prepared = scenes.prepare(spec, **kw) if scenes is not None else None
     geo = dict(scale=scale, max_bounces=max_bounces, thin_lens=thin_lens)
-    if support == "geometric":
-        sup = support_mod.geometric_support(spec, **geo)
-    elif support == "pilot":
-        sup = support_mod.pilot_support(spec, seed=seed, prepared=prepared, **geo)
-    else:
-        sup = support_mod.full_support(spec.rig.camera, scale)
+
+    def make():
+        if support == "geometric":
+            return support_mod.geometric_support(spec, **geo)
+        if support == "pilot":
+            return support_mod.pilot_support(spec, seed=seed, prepared=prepared, **geo)
+        return support_mod.full_support(spec.rig.camera, scale)
+
+    sup = make() if scenes is None else scenes.support(spec, make, method=support, **geo)
     window = None
     if pixels_xy is not None:
         px = np.asarray(pixels_xy, dtype=np.int64).reshape(-1, 2)

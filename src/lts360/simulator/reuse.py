@@ -70,6 +70,7 @@ class SceneCache:
             raise ValueError(f"max_scenes must be an integer >= 1, got {max_scenes!r}")
         self.max_scenes = max_scenes
         self._scenes: dict[str, tuple] = {}
+        self._supports: dict[str, object] = {}
         self.loads = 0
         self.reuses = 0
 
@@ -80,6 +81,22 @@ class SceneCache:
                            spec.background_z_mm, len(spec.targets),
                            sorted(render_kw.items())], default=repr)
         return hashlib.sha1(text.encode()).hexdigest()
+
+    def support(self, spec, make, **key_kw):
+        """The pixel support ``make()`` returns for ``spec``, computed once per scene state:
+        the same rig, shapes (vertices included) and ``key_kw`` give the cached support (a
+        static object's frames, a Monte Carlo's repeats), a moved object a new one."""
+        verts = hashlib.sha1()
+        for _, mesh, _ in spec.meshes:
+            verts.update(np.ascontiguousarray(np.asarray(mesh.vertices, np.float64)).tobytes())
+        key = self._key(spec, key_kw) + verts.hexdigest()
+        sup = self._supports.pop(key, None)
+        if sup is None:
+            sup = make()
+        self._supports[key] = sup
+        while len(self._supports) > self.max_scenes:
+            self._supports.pop(next(iter(self._supports)))
+        return sup
 
     def prepare(self, spec, **render_kw):
         """``(scene, integrator)`` for ``spec`` as :func:`lts360.simulator.render.prepare_scene`
