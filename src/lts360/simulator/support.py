@@ -15,9 +15,11 @@ module says which pixels those are, from the scene itself (no render):
    to each slab and the clipped triangles are sampled with points no farther apart than
    :data:`SAMPLE_SPACING_PX` pixels in the nearest view.
 2. **Where it is seen.**  Each point is projected (with distortion) directly and through every
-   camera-side mirror sequence up to ``max_bounces`` (its mirror image ``T_c1 … T_ck x``), all
-   images kept: neither the mirrors' extent nor occlusion is tested, so the support is a
-   superset (a few hidden images cost render time, never light).
+   camera-side mirror sequence up to ``max_bounces`` (its mirror image ``T_c1 … T_ck x``),
+   where the line from the camera centre to that image crosses each mirror of the sequence
+   inside its rectangle grown by the lens aperture + 1 mm (rays from the whole pupil reach a
+   mirror's edge).  Occlusion is not tested: the support is a superset (a hidden image costs
+   render time, never light).
 3. **How far it spreads.**  Each image point is widened by its defocus blur (the thin lens's
    circle of confusion at its own path length, :func:`blur_diameter_px`) and by
    :data:`MARGIN_PX` (the pixel's box, the sampling's jitter and the spacing of the points).
@@ -50,8 +52,8 @@ SUPPORT_METHODS = ("geometric", "pilot", "full")
 #: Margin added around every image point beyond its defocus blur (pixels of the rendered
 #: film): a lit pixel's centre lies within 0.71 px (its box) of a lit point's image, and that
 #: image within 1.15 · 1.1 px of a sample's (row sampling 0.71 + de-duplication 0.44 spacings of
-#: SAMPLE_SPACING_PX, 1.1 for the field angle's stretch): 1.98 px.  The splat adds one more
-#: pixel for rounding the samples' images to pixels.
+#: SAMPLE_SPACING_PX, 1.1 for the field angle's stretch): 1.98 px.  The splat adds √2/2 px
+#: for rounding the samples' images to pixels.
 MARGIN_PX = 2.0
 #: Largest distance between neighbouring surface samples, in pixels of the nearest view.
 SAMPLE_SPACING_PX = 1.0
@@ -335,8 +337,14 @@ def geometric_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_le
         return PixelSupport(mask=mask, method="geometric", margin_px=float(margin_px))
     pts = slab_points(tris, step_mm=SAMPLE_SPACING_PX * zmin / K[0, 0])
     uv_all, r_all = [], []
-    for A, b in maps:
-        Pc = world_to_camera(pts @ A.T + b, cam.R, cam.t_mm)
+    C = cam.center_mm
+    # A ray through a mirror passes within the aperture's radius of the chief ray: a mirror
+    # edge is blurred over that much (plus 1 mm).
+    edge_mm = cam.aperture_diameter_mm + 1.0 if thin_lens else 1.0
+    for seq, (A, b) in zip(_sequences(rig, max_bounces), maps):
+        Xv = pts @ A.T + b
+        seen = _through_mirrors(rig, seq, C, Xv, edge_mm)
+        Pc = world_to_camera(Xv[seen], cam.R, cam.t_mm)
         front = Pc[:, 2] > 1e-6
         if not front.any():
             continue
@@ -351,6 +359,32 @@ def geometric_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_le
                         method="geometric", margin_px=float(margin_px))
 
 
+def _through_mirrors(rig, seq, C: np.ndarray, Xv: np.ndarray, edge_mm: float) -> np.ndarray:
+    """(n,) bool: whether the straight line from the camera centre ``C`` to the mirror images
+    ``Xv`` (n, 3) of sequence ``seq`` crosses each mirror of ``seq`` (unfolded) inside its
+    rectangle grown by ``edge_mm``, in order, before the image.  Occlusion is not tested."""
+    ok = np.ones(len(Xv), bool)
+    d = Xv - C
+    t_prev = np.zeros(len(Xv))
+    for j, k in enumerate(seq):
+        m = rig.mirrors[k]
+        A, b = _compose(rig.mirrors, seq[:j])          # unfolds mirror k's plane
+        Ai, bi = _compose(rig.mirrors, tuple(reversed(seq[:j])))
+        n = A @ np.asarray(m.normal, float)
+        c = A @ np.asarray(m.center_mm, float) + b
+        den = d @ n
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = ((c - C) @ n) / den
+        q = C + t[:, None] * d
+        p = q @ Ai.T + bi - np.asarray(m.center_mm, float)
+        u = np.abs(p @ np.asarray(m.u_axis, float))
+        v = np.abs(p @ np.asarray(m.v_axis, float))
+        ok &= (np.abs(den) > 1e-12) & (t > t_prev) & (t < 1.0) \
+            & (u <= m.width_mm / 2 + edge_mm) & (v <= m.height_mm / 2 + edge_mm)
+        t_prev = np.where(ok, t, t_prev)
+    return ok
+
+
 def _depth_range(P_world: np.ndarray, cam) -> tuple[float, float]:
     """Smallest and largest depth in front of the camera (``inf, -inf`` if none)."""
     z = world_to_camera(P_world, cam.R, cam.t_mm)[:, 2]
@@ -359,12 +393,14 @@ def _depth_range(P_world: np.ndarray, cam) -> tuple[float, float]:
 
 
 def _splat(uv: np.ndarray, radius_px: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """Mask of every pixel centre within ``radius_px`` of a point ``uv`` (points grouped by
-    their radius rounded up to an integer, each group dilated by a disk of that radius)."""
+    """Mask of every pixel centre within ``radius_px`` of a point ``uv`` (points rounded to
+    their pixel and grouped by their radius + √2/2 rounded up, each group dilated by a disk of
+    that radius)."""
     import cv2
 
     h, w = shape
-    R = np.ceil(radius_px).astype(np.int64)
+    # Rounding a point's image to its pixel moves it by ≤ √2/2 px: the disk is that much wider.
+    R = np.ceil(radius_px + np.sqrt(0.5)).astype(np.int64)
     pad = int(R.max()) + 1
     iu = np.rint(uv[:, 0]).astype(np.int64) + pad
     iv = np.rint(uv[:, 1]).astype(np.int64) + pad
@@ -372,8 +408,7 @@ def _splat(uv: np.ndarray, radius_px: np.ndarray, shape: tuple[int, int]) -> np.
     out = np.zeros((h + 2 * pad, w + 2 * pad), np.uint8)
     for r in np.unique(R[inside]):
         sel = inside & (R == r)
-        # The rounding of uv to a pixel moves a point by ≤ 0.71 px: the disk is one pixel wider.
-        rr = int(r) + 1
+        rr = int(r)
         kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * rr + 1, 2 * rr + 1))
         x0, x1 = max(0, iu[sel].min() - rr), min(out.shape[1], iu[sel].max() + rr + 1)
         y0, y1 = max(0, iv[sel].min() - rr), min(out.shape[0], iv[sel].max() + rr + 1)
