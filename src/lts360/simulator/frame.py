@@ -272,10 +272,13 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
         radiance += laser * (pattern - 1.0)
     if exposure_time_s is None:
         lit = laser > 0
+        # The statistic over the laser-lit pixels only (the same values as a mask over the
+        # whole frame, without converting the dark rest).
         exposure_time_s = sensor_mod.auto_exposure(
-            res.radiance_W_m2_sr, sens, wavelength_nm=rig.laser.wavelength_nm,
-            f_number=cam.f_number, pixel_pitch_um=pitch_um, target_fraction=exposure_fraction,
-            percentile=99.9, mask=lit if lit.any() else None, magnification=magnification)
+            res.radiance_W_m2_sr[lit] if lit.any() else res.radiance_W_m2_sr, sens,
+            wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
+            pixel_pitch_um=pitch_um, target_fraction=exposure_fraction, percentile=99.9,
+            magnification=magnification)
     electrons = sensor_mod.radiance_to_electrons_mean(
         radiance, wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
         pixel_pitch_um=pitch_um, exposure_time_s=exposure_time_s,
