@@ -441,7 +441,8 @@ def pilot_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_lens: 
     ``spp`` for such light).  Costs a full-frame render at ``spp``.
 
     ``prepared`` : (scene, integrator) from :func:`lts360.simulator.render.prepare_scene`
-    with the frame's arguments — the pilot then renders exactly that integrator.
+    with the frame's arguments — the pilot then renders exactly that integrator, at that
+    scene's sample count (its sampler's), not ``spp``.
     """
     from lts360.simulator.render import render_pixels
 
