@@ -18,8 +18,9 @@ module says which pixels those are, from the scene itself (no render):
    camera-side mirror sequence up to ``max_bounces`` (its mirror image ``T_c1 … T_ck x``),
    where the line from the camera centre to that image crosses each mirror of the sequence
    inside its rectangle grown by the lens aperture + 1 mm (rays from the whole pupil reach a
-   mirror's edge).  Occlusion is not tested: the support is a superset (a hidden image costs
-   render time, never light).
+   mirror's edge), and where the point's face turns towards the (unfolded) camera: the
+   BSDFs are one-sided, a face seen from behind holds no light.  Occlusion by other surfaces
+   is not tested: the support is a superset (a hidden image costs render time, never light).
 3. **How far it spreads.**  Each image point is widened by its defocus blur (the thin lens's
    circle of confusion at its own path length, :func:`blur_diameter_px`) and by
    :data:`MARGIN_PX` (the pixel's box, the sampling's jitter and the spacing of the points).
@@ -57,6 +58,10 @@ SUPPORT_METHODS = ("geometric", "pilot", "full")
 MARGIN_PX = 2.0
 #: Largest distance between neighbouring surface samples, in pixels of the nearest view.
 SAMPLE_SPACING_PX = 1.0
+#: A surface point counts as seen by a view while its face normal makes at most
+#: arccos(−BACKFACE_COS) ≈ 91.1° with the direction to the camera (the pupil's rays spread
+#: ~0.6° about the chief ray at these distances).
+BACKFACE_COS = 0.02
 #: Samples per pixel of a pilot render (:func:`pilot_support`).
 PILOT_SPP = 4
 #: A pilot pixel belongs to the support when its laser radiance exceeds this fraction of the
@@ -205,7 +210,7 @@ def _sample_triangles(tri: np.ndarray, step_mm: float) -> np.ndarray:
     (a flat face clipped to a thin slab) cost no more than their area.
     """
     if len(tri) == 0:
-        return np.zeros((0, 3))
+        return np.zeros((0, 3)), np.zeros(0, np.int64)
     e = np.stack([tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 1], tri[:, 0] - tri[:, 2]], axis=1)
     lens = np.linalg.norm(e, axis=2)
     k = np.argmax(lens, axis=1)                       # longest edge: vertices k, k+1
@@ -228,7 +233,7 @@ def _sample_triangles(tri: np.ndarray, step_mm: float) -> np.ndarray:
     tr, tt = tri_of_row[row_of_pt], t[row_of_pt]
     P0 = A[tr] + tt[:, None] * (C[tr] - A[tr])
     P1 = B[tr] + tt[:, None] * (C[tr] - B[tr])
-    return P0 + s[:, None] * (P1 - P0)
+    return P0 + s[:, None] * (P1 - P0), tr
 
 
 def slab_triangles(rig, shapes, *, max_bounces: int = 2) -> np.ndarray:
@@ -251,22 +256,32 @@ def slab_triangles(rig, shapes, *, max_bounces: int = 2) -> np.ndarray:
     return np.concatenate(tris)
 
 
-def slab_points(tris: np.ndarray, *, step_mm: float) -> np.ndarray:
+def slab_points(tris: np.ndarray, *, step_mm: float, return_normals: bool = False):
     """Points, ``≤ step_mm`` apart, covering the triangles ``tris`` (m, 3, 3) (from
-    :func:`slab_triangles`): every point of a triangle lies within ``0.71 step_mm`` of one."""
+    :func:`slab_triangles`): every point of a triangle lies within ``0.71 step_mm`` of one.
+
+    With ``return_normals``, also the (n, 3) unit normal of each point's triangle (by its
+    vertex order, as the renderer's face normals; NaN for a degenerate triangle)."""
     if not step_mm > 0:
         raise ValueError(f"step_mm must be > 0, got {step_mm!r}")
-    pts = [_sample_triangles(tris, step_mm)] if len(tris) else []
-    if not pts:
-        return np.zeros((0, 3))
-    # Neighbouring triangles sample their shared edges twice: keep one point per cube of
-    # side step/4 (a dropped point lies within step/4·√3 < 0.44 step of a kept one).
-    P = np.concatenate(pts)
-    c = np.floor(P / (0.25 * step_mm)).astype(np.int64)
-    c -= c.min(axis=0)
-    span = c.max(axis=0) + 1
-    _, first = np.unique((c[:, 0] * span[1] + c[:, 1]) * span[2] + c[:, 2], return_index=True)
-    return P[np.sort(first)]
+    t = np.asarray(tris, float).reshape(-1, 3, 3)
+    P, tri_index = _sample_triangles(t, step_mm)
+    n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    N = n[tri_index]
+    if len(P):
+        # Neighbouring triangles sample their shared edges twice: keep one point per cube of
+        # side step/4 (a dropped point lies within step/4·√3 < 0.44 step of a kept one) and
+        # per facing (normals in bins of 0.25: a point of a face turned away from a view
+        # never stands in for one of a face turned towards it).
+        c = np.floor(P / (0.25 * step_mm)).astype(np.int64)
+        q = np.where(np.isnan(N), 4, np.floor(np.nan_to_num(N) * 4.0)).astype(np.int64) + 4
+        cq = np.concatenate([c - c.min(axis=0), q], axis=1)
+        _, first = np.unique(np.ravel_multi_index(cq.T, cq.max(axis=0) + 1), return_index=True)
+        keep = np.sort(first)
+        P, N = P[keep], N[keep]
+    return (P, N) if return_normals else P
 
 
 # ---------------------------------------------------------------------------------- blur
@@ -335,7 +350,8 @@ def geometric_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_le
         zmin = min(_depth_range(tv @ A.T + b, cam)[0] for A, b in maps)
     if not math.isfinite(zmin):
         return PixelSupport(mask=mask, method="geometric", margin_px=float(margin_px))
-    pts = slab_points(tris, step_mm=SAMPLE_SPACING_PX * zmin / K[0, 0])
+    pts, normals = slab_points(tris, step_mm=SAMPLE_SPACING_PX * zmin / K[0, 0],
+                               return_normals=True)
     uv_all, r_all = [], []
     C = cam.center_mm
     # A ray through a mirror passes within the aperture's radius of the chief ray: a mirror
@@ -343,7 +359,13 @@ def geometric_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_le
     edge_mm = cam.aperture_diameter_mm + 1.0 if thin_lens else 1.0
     for seq, (A, b) in zip(_sequences(rig, max_bounces), maps):
         Xv = pts @ A.T + b
-        seen = _through_mirrors(rig, seq, C, Xv, edge_mm)
+        # One-sided surfaces (no BSDF here is two-sided): a point seen from behind its face
+        # holds no light for this view.  The pupil's rays reach up to ~1° around the chief
+        # ray: keep faces down to BACKFACE_COS edge-on.
+        to_cam = C - Xv
+        facing = np.einsum("ij,ij->i", normals @ A.T, to_cam) \
+            > -BACKFACE_COS * np.linalg.norm(to_cam, axis=1)
+        seen = (facing | np.isnan(normals[:, 0])) & _through_mirrors(rig, seq, C, Xv, edge_mm)
         Pc = world_to_camera(Xv[seen], cam.R, cam.t_mm)
         front = Pc[:, 2] > 1e-6
         if not front.any():
