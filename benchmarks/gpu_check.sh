@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# GPU check of lts360: render rate (cuda_ad_mono), recon kernel (Dr.Jit CUDA) and the wall time of
-# a 1000-trial Monte Carlo, printed as one table with the targets beside (≤ 8 min in all).
+# GPU check of lts360: render rate (cuda_ad_mono; the full frame and the pixel support on a scene
+# built once), recon kernel (Dr.Jit CUDA) and the wall time of a 1000-trial Monte Carlo, printed
+# as one table with the targets beside (≤ 8 min in all).
 # What is measured, and how: the docstring of benchmarks/gpu_check.py.
 #
 # Beforehand, on a machine with a package index, in the repository root (CPython 3.12 wheels,

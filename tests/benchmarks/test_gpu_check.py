@@ -24,6 +24,7 @@ ROWS = (
     "render_first_16", "render_fps_16", "render_only_fps_16",
     "render_first_64", "render_fps_64", "render_only_fps_64",
     "stripe_rms_px_direct", "stripe_rms_px_left", "stripe_rms_px_right",
+    "full_cached_fps_16", "support_fps_16", "support_fps_256",
     "recon_plan_s", "recon_setup_s", "recon_first_ms", "recon_ms", "recon_kernel_ms",
     "recon_vs_llvm_um", "recon_vs_llvm_n", "recon_vs_numpy_um", "recon_vs_numpy_n",
     "mc_setup_s", "mc_wall_s", "mc_1000_s",
@@ -92,7 +93,10 @@ def test_table_prints_every_row_and_no_targets_in_quick_mode(driver, quick_run):
 def test_verdicts_against_the_targets(driver):
     assert driver.verdict("render_fps_16", 120.0, quick=False) == "yes"
     assert driver.verdict("render_fps_16", 80.0, quick=False) == "NO"
-    assert driver.verdict("recon_ms", 0.8, quick=False) == "yes"
+    assert driver.verdict("recon_ms", 0.25, quick=False) == "yes"
+    assert driver.verdict("recon_ms", 0.8, quick=False) == "NO"
+    assert driver.verdict("support_fps_256", 520.0, quick=False) == "yes"
+    assert driver.verdict("full_cached_fps_16", 120.0, quick=False) == "NO"
     assert driver.verdict("mc_1000_s", 75.0, quick=False) == "NO"
     assert driver.verdict("stripe_rms_px", 0.02, quick=True) == "n/a"
     assert driver.verdict("recon_plan_s", 1.0, quick=False) == ""

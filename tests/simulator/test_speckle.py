@@ -172,3 +172,38 @@ def test_full_frame_smoke():
     assert P.mean(dtype=np.float64) == pytest.approx(1.0, abs=1e-6)
     assert P.std() == pytest.approx(SP.speckle_contrast_theory(f_number=1.4, **PAPER),
                                     rel=CONTRAST_RTOL)
+
+
+# ---- speckle on the lit tiles only ----------------------------------------------------------
+def test_tiles_have_the_patterns_contrast_and_correlation():
+    """Speckle drawn on the lit tiles of a frame (a stripe): inside the tiles its contrast is
+    the theory's and its correlation at one and two pixels that of a whole pattern; unlit
+    tiles are 1; the same seed gives the same pattern."""
+    kw = dict(f_number=1.4, **PAPER)
+    lit = np.zeros((512, 640), bool)
+    lit[100:104, :] = True           # a horizontal stripe: 20 tiles
+    lit[200:500, 300:303] = True     # a vertical one: 10 tiles
+    P = SP.speckle_on_tiles(lit, rng=7, **kw)
+    assert P.shape == lit.shape and P.dtype == np.float32
+    T = SP.SPECKLE_TILE_PX
+    tiles = np.zeros((512 // T, 640 // T), bool)
+    tiles[100 // T, :] = True
+    tiles[200 // T:500 // T + 1, 300 // T] = True
+    on = np.kron(tiles, np.ones((T, T), bool))
+    assert np.all(P[~on] == 1.0) and np.all(P[on] != 1.0)
+    assert np.array_equal(P, SP.speckle_on_tiles(lit, rng=7, **kw))
+    theory = SP.speckle_contrast_theory(**kw)
+    # 30 tiles of 32² px (~1000 speckle cells each at f/1.4): the contrast to CONTRAST_RTOL.
+    assert P[on].std() == pytest.approx(theory, rel=CONTRAST_RTOL)
+    whole = np.stack([SP.speckle_pattern((256, 256), rng=k, **kw) for k in range(2)])
+
+    def corr(a, lag):  # lag along x inside tiles only (pairs that do not cross a tile edge)
+        x = np.arange(a.shape[-1])
+        keep = (x % T) < T - lag
+        u, v = a[..., :-lag][..., keep[:-lag]], a[..., lag:][..., keep[:-lag]]
+        return np.corrcoef(u.ravel(), v.ravel())[0, 1]
+
+    cells = P.reshape(512 // T, T, 640 // T, T).transpose(0, 2, 1, 3)[tiles]
+    for lag in (1, 2):
+        # Correlation estimates from ~30 000 pixel pairs: ±0.02 (their sampling error).
+        assert corr(cells, lag) == pytest.approx(corr(whole, lag), abs=0.03)

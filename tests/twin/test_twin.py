@@ -210,8 +210,10 @@ def small_gauge_frame(tmp_path_factory):
 
     if mi.variant() is None:
         mi.set_variant("llvm_ad_mono")
+    # The full frame, the realisation these figures were measured on (a support-only frame
+    # is another realisation of the same render noise).
     frame = simulate_frame(load_rig("paper"), build_object("plug-gauge:d=12,x=2"), spp=16,
-                           seed=0, noise="none", scale=0.5)
+                           seed=0, noise="none", scale=0.5, support="full")
     return write_frame(tmp_path_factory.mktemp("twin") / "g12", frame)
 
 

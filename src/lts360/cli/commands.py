@@ -102,7 +102,8 @@ def cmd_render(args) -> int:
               ambient=args.ambient, scale=args.scale, max_bounces=args.max_bounces,
               thin_lens=not args.pinhole, background_z_mm=args.background_z_mm,
               exposure_time_s=None if args.exposure_us is None else args.exposure_us * 1e-6,
-              exposure_fraction=args.exposure_fraction)
+              exposure_fraction=args.exposure_fraction,
+              support="full" if args.full_frame else args.support)
     if acq is not None:
         return _render_moving(args, rig, obj, acq, out, variant)
     if args.sections == 1:
@@ -117,10 +118,13 @@ def cmd_render(args) -> int:
     tmp = out.with_name(f".{out.name}.partial")
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
+    from lts360.simulator.reuse import SceneCache
+
     zs = args.z_mm + (np.arange(args.sections) - (args.sections - 1) / 2.0) * args.pitch_mm
     sections = []
+    scenes = SceneCache()  # one scene for the scan: each section moves the object
     for k, z in enumerate(_progress(zs, "sections")):
-        frame = simulate_frame(rig, obj, z_mm=float(z), seed=args.seed + k,
+        frame = simulate_frame(rig, obj, z_mm=float(z), seed=args.seed + k, scenes=scenes,
                                **{key: v for key, v in kw.items() if key != "seed"})
         write_frame(tmp / f"section_{k:04d}", frame)
         sections.append({"dir": f"section_{k:04d}", "z_mm": float(z), "seed": args.seed + k})

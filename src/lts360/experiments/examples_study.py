@@ -59,11 +59,14 @@ def examples_trial(trial: Trial) -> TrialOutput:
     n, pitch = int(p["sections"]), float(p["pitch_mm"])
     zc = float(np.mean(obj.measured_zone_z_mm))
     zs = zc + (np.arange(n) - (n - 1) / 2.0) * pitch
+    from lts360.simulator.reuse import SceneCache
+
     cal, sections, t_render, rig_truth = None, [], 0.0, None
+    scenes = SceneCache()  # built once for the object's scan: each section moves it
     for k, z in enumerate(zs):
         t0 = time.perf_counter()
         frame = simulate_frame(rig, obj, z_mm=float(z), spp=int(p["spp"]),
-                               seed=trial.seed + k, noise=p["noise"])
+                               seed=trial.seed + k, noise=p["noise"], scenes=scenes)
         t_render += time.perf_counter() - t0
         if rig_truth is None:
             rig_truth = json.loads(json.dumps(frame.truth, default=lambda v: v.tolist()))

@@ -24,12 +24,16 @@ from lts360.simulator.io import rig_truth, write_exr, write_json, write_png
 from lts360.simulator.render import RenderResult, render_radiance, render_radiance_pixels
 from lts360.simulator.scene import SceneSpec
 from lts360.simulator.materials import material_to_bsdf
+from lts360.simulator.support import SUPPORT_METHODS, PixelSupport
 
-__all__ = ["DEFAULT_SPP", "NOISE_MODES", "Frame", "simulate_frame", "write_frame", "stage_transform",
-           "sensor_image"]
+__all__ = ["DEFAULT_SPP", "NOISE_MODES", "AMBIENT_SPP", "Frame", "simulate_frame", "render_frame",
+           "write_frame", "stage_transform", "sensor_image"]
 
 DEFAULT_SPP = 16
 NOISE_MODES = ("none", "realistic")
+#: Samples per pixel of the ambient-only full-frame render that fills the pixels outside the
+#: laser's support when ambient light is on (ambient light varies slowly over the image).
+AMBIENT_SPP = 4
 
 
 def stage_transform(z_mm: float) -> np.ndarray:
@@ -58,7 +62,8 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
                    thin_lens: bool = True, exposure_time_s: float | None = None,
                    speckle_seed: int | None = None, background_z_mm: float | None = None,
                    exposure_fraction: float = 0.8, extra_meshes: tuple = (),
-                   pixels_xy: np.ndarray | None = None) -> Frame:
+                   pixels_xy: np.ndarray | None = None, support: str = "geometric",
+                   scenes=None) -> Frame:
     """Render one frame of ``obj`` in ``rig`` at stage height ``z_mm``.
 
     Parameters
@@ -83,6 +88,20 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
         offset and noise).  For a study that reads a band the calibration predicts: the
         pixels it reads have the statistics of a full render's (another noise realisation),
         at the cost of the pixels listed.  ``truth["render"]["pixels"]`` counts them.
+        Overrides ``support``.
+    support : {"geometric", "pilot", "full"}
+        Which pixels are rendered at ``spp`` (:mod:`lts360.simulator.support`).
+        ``geometric`` (default): every pixel that can hold direct laser light, from the scene's
+        geometry (the sheet's slab on every shape, seen through every view, widened by the
+        defocus blur); ``pilot``: the pixels a low-spp full render of the same integrator
+        lights (for light the geometry does not bound, e.g. interreflections); ``full``:
+        every pixel (the render before supports; ``lts360 render --full-frame``).  Outside the
+        support a pixel holds no laser light: with ambient light off it gets none, with it on
+        the ambient radiance of one full-frame ambient-only render at :data:`AMBIENT_SPP`.
+        ``truth["render"]["support"]`` records the method and the pixel count.
+    scenes : lts360.simulator.reuse.SceneCache, optional
+        Build once, render many: a loop passes one cache to all its frames, and a frame
+        whose shapes only moved reuses the loaded scene (same image as a fresh load).
     """
     if noise not in NOISE_MODES:
         raise ValueError(f"noise must be one of {', '.join(NOISE_MODES)}, got {noise!r}")
@@ -91,10 +110,9 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
     mesh.apply_transform(T_stage)
     meshes = (("object", mesh, material_to_bsdf(obj.material)),) + tuple(extra_meshes)
     spec = SceneSpec(rig, meshes, ambient=ambient, background_z_mm=background_z_mm)
-    kw = dict(spp=spp, seed=seed, scale=scale, max_bounces=max_bounces, thin_lens=thin_lens,
-              laser_on=laser_on)
-    res = (render_radiance(spec, **kw) if pixels_xy is None
-           else render_radiance_pixels(spec, pixels_xy, **kw))
+    res, sup = render_frame(spec, spp=spp, seed=seed, scale=scale, max_bounces=max_bounces,
+                            thin_lens=thin_lens, laser_on=laser_on, pixels_xy=pixels_xy,
+                            support=support, scenes=scenes)
     image, exposure_time_s, magnification = sensor_image(
         rig, res, noise=noise, seed=seed, speckle_seed=speckle_seed, scale=scale,
         exposure_time_s=exposure_time_s, exposure_fraction=exposure_fraction)
@@ -110,13 +128,94 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
                    "max_bounces": max_bounces, "thin_lens": thin_lens, "laser_on": laser_on,
                    "ambient": ambient, "background_z_mm": background_z_mm,
                    "seconds": res.seconds,
-                   "pixels": None if pixels_xy is None else int(len(pixels_xy))},
+                   "pixels": None if pixels_xy is None else int(len(pixels_xy)),
+                   "support": sup.to_dict()},
         "sensor": {"noise": noise, "exposure_time_s": float(exposure_time_s),
                    "speckle_seed": speckle_seed, "magnification": magnification,
                    "bit_depth": sens.bit_depth, "model": sens.to_dict()},
     })
     return Frame(image=image, render=res, exposure_time_s=float(exposure_time_s), truth=truth,
                  mesh_world=mesh)
+
+
+def render_frame(spec: SceneSpec, *, spp: int, seed: int, scale: float = 1.0, max_bounces: int = 2,
+                 thin_lens: bool = True, laser_on: bool = True, pixels_xy=None,
+                 support: str = "geometric", scenes=None
+                 ) -> tuple[RenderResult, PixelSupport]:
+    """The radiance of a frame, rendered on its pixel support (``simulate_frame``'s render).
+
+    Parameters
+    ----------
+    spec : SceneSpec
+    spp, seed, scale, max_bounces, thin_lens, laser_on
+        As :func:`lts360.simulator.render.render_radiance`.
+    pixels_xy : (n, 2) int, optional
+        A window: only its pixels may be rendered (those of the support among them); the
+        rest of the frame is 0.
+    support : {"geometric", "pilot", "full"}
+        See :func:`simulate_frame`.
+    scenes : lts360.simulator.reuse.SceneCache, optional
+        Scenes built once for a loop: the scene is reused (vertices moved) when it can be.
+
+    Returns
+    -------
+    RenderResult
+        Full size; ``seconds`` is the whole call (support and ambient render included).
+    PixelSupport
+        The pixels rendered at ``spp`` (``method`` ``"window"`` when ``pixels_xy`` was given
+        with ``support="full"``).
+    """
+    import time
+
+    from lts360.geometry.camera import scale_intrinsics
+    from lts360.simulator import support as support_mod
+    from lts360.simulator.render import render_pixels, require_variant
+
+    if support not in SUPPORT_METHODS:
+        raise ValueError(f"support must be one of {', '.join(SUPPORT_METHODS)}, got {support!r}")
+    t0 = time.perf_counter()
+    if not laser_on:  # no laser light: every pixel holds only what the whole image holds
+        support = "full"
+    kw = dict(spp=spp, scale=scale, max_bounces=max_bounces, thin_lens=thin_lens,
+              laser_on=laser_on)
+    w, h = support_mod.film_size(spec.rig.camera, scale)
+    if support == "full" and pixels_xy is None and scenes is None:
+        return render_radiance(spec, seed=seed, **kw), support_mod.full_support(spec.rig.camera, scale)
+    prepared = scenes.prepare(spec, **kw) if scenes is not None else None
+    geo = dict(scale=scale, max_bounces=max_bounces, thin_lens=thin_lens)
+
+    def make():
+        if support == "geometric":
+            return support_mod.geometric_support(spec, **geo)
+        if support == "pilot":
+            return support_mod.pilot_support(spec, seed=seed, prepared=prepared, **geo)
+        return support_mod.full_support(spec.rig.camera, scale)
+
+    sup = make() if scenes is None else scenes.support(spec, make, method=support, **geo)
+    window = None
+    if pixels_xy is not None:
+        px = np.asarray(pixels_xy, dtype=np.int64).reshape(-1, 2)
+        if len(px) and (px.min() < 0 or np.any(px.max(axis=0) >= (w, h))):
+            raise ValueError(f"pixels_xy must lie inside the {w} x {h} film")
+        window = np.zeros((h, w), bool)
+        window[px[:, 1], px[:, 0]] = True
+        sup = PixelSupport(mask=sup.mask & window,
+                           method=sup.method if sup.method != "full" else "window",
+                           margin_px=sup.margin_px)
+    radiance = np.zeros((h, w), np.float32)
+    laser = np.zeros((h, w), np.float32)
+    if spec.ambient != "off" and sup.method not in ("full", "window"):
+        amb = render_radiance(spec, spp=AMBIENT_SPP, seed=seed, scale=scale,
+                              max_bounces=max_bounces, thin_lens=thin_lens, laser_on=False)
+        radiance[:] = amb.radiance_W_m2_sr if window is None else amb.radiance_W_m2_sr * window
+    px = sup.pixels_xy
+    rad, las, _ = render_pixels(spec, px, seed=seed, prepared=prepared, **kw)
+    radiance[px[:, 1], px[:, 0]] = rad
+    laser[px[:, 1], px[:, 0]] = las
+    res = RenderResult(radiance_W_m2_sr=radiance, laser_W_m2_sr=laser,
+                       K=scale_intrinsics(spec.rig.camera.K, scale), variant=require_variant(),
+                       spp=spp, seed=seed, seconds=time.perf_counter() - t0)
+    return res, sup
 
 
 def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int = 0,
@@ -151,7 +250,7 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
         Lateral magnification at the focus distance (the working f-number is N (1 + m)).
     """
     from lts360.simulator import sensor as sensor_mod
-    from lts360.simulator.speckle import speckle_pattern
+    from lts360.simulator.speckle import speckle_on_tiles
 
     if noise not in NOISE_MODES:
         raise ValueError(f"noise must be one of {', '.join(NOISE_MODES)}, got {noise!r}")
@@ -166,24 +265,22 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
     laser = res.laser_W_m2_sr
     if speckle is None:
         speckle = noise == "realistic"
-    lit_rows = np.flatnonzero(laser.any(axis=1))
-    if speckle and lit_rows.size:
-        # Speckle is stationary: draw it on the laser-lit bounding box only (plus a margin so
-        # the field's FFT filtering sees no edge), which is a fraction of the frame.
-        lit_cols = np.flatnonzero(laser.any(axis=0))
-        pad = 16
-        r0, r1 = max(0, lit_rows[0] - pad), min(laser.shape[0], lit_rows[-1] + pad + 1)
-        c0, c1 = max(0, lit_cols[0] - pad), min(laser.shape[1], lit_cols[-1] + pad + 1)
-        pattern = speckle_pattern((r1 - r0, c1 - c0), pixel_pitch_um=pitch_um,
-                                  wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
-                                  magnification=magnification, rng=np.random.default_rng(seeds[0]))
-        radiance[r0:r1, c0:c1] += laser[r0:r1, c0:c1] * (pattern - 1.0)
+    if speckle and laser.any():
+        # Speckle is stationary: draw it only on the image tiles that hold laser light.
+        pattern = speckle_on_tiles(laser > 0, pixel_pitch_um=pitch_um,
+                                   wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
+                                   magnification=magnification,
+                                   rng=np.random.default_rng(seeds[0]))
+        radiance += laser * (pattern - 1.0)
     if exposure_time_s is None:
         lit = laser > 0
+        # The statistic over the laser-lit pixels only (the same values as a mask over the
+        # whole frame, without converting the dark rest).
         exposure_time_s = sensor_mod.auto_exposure(
-            res.radiance_W_m2_sr, sens, wavelength_nm=rig.laser.wavelength_nm,
-            f_number=cam.f_number, pixel_pitch_um=pitch_um, target_fraction=exposure_fraction,
-            percentile=99.9, mask=lit if lit.any() else None, magnification=magnification)
+            res.radiance_W_m2_sr[lit] if lit.any() else res.radiance_W_m2_sr, sens,
+            wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
+            pixel_pitch_um=pitch_um, target_fraction=exposure_fraction, percentile=99.9,
+            magnification=magnification)
     electrons = sensor_mod.radiance_to_electrons_mean(
         radiance, wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
         pixel_pitch_um=pitch_um, exposure_time_s=exposure_time_s,

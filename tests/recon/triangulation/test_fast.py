@@ -153,3 +153,24 @@ def test_profile_walk_matches_main_run_and_centroid():
     assert np.array_equal(np.isfinite(pk), np.isfinite(ref.intensity))
     assert np.allclose(pk[np.isfinite(pk)], ref.intensity[np.isfinite(pk)])
     assert {int(v) for v in np.unique(ref.quality)} == {0, 1, 2, 3, 5, 6}
+
+
+def test_fast_path_reads_an_image_already_on_the_device(case, fast):
+    """A frame kept on the device (a Dr.Jit tensor of the plan's backend, uint8 or float) gives
+    the result of the same image from the host, bit for bit: the same kernel on the same
+    numbers; a tensor of the wrong shape is refused."""
+    from drjit.llvm import TensorXf, TensorXu8
+
+    image = case[0]
+    ref = fast(image)
+    for dev, host in ((TensorXu8(image), image),
+                      (TensorXf(image.astype(np.float32)), image.astype(np.float32))):
+        got, want = fast(dev), fast(host)
+        assert got.threshold == want.threshold and got.saturation == want.saturation
+        for name, a in want.views.items():
+            b = got.views[name]
+            assert np.array_equal(a.quality, b.quality), name
+            assert np.array_equal(a.r_mm, b.r_mm, equal_nan=True), name
+    assert fast(TensorXu8(image)).threshold == ref.threshold
+    with pytest.raises(ValueError, match="shape"):
+        fast(TensorXu8(image[:-1]))

@@ -90,7 +90,11 @@ def rendered():
     from lts360.simulator.frame import simulate_frame
 
     obj = build_object("plug-gauge")
-    frame = simulate_frame(load_rig("paper"), obj, spp=16, seed=11, thin_lens=False)
+    # Full frames: the aperture test compares this frame point by point with thin-lens frames
+    # of the same seed, whose noise cancels only when every pixel gets the same samples (a
+    # pixel support depends on the optics, and its pixels' samples on the support).
+    frame = simulate_frame(load_rig("paper"), obj, spp=16, seed=11, thin_lens=False,
+                           support="full")
     truth = json.loads(json.dumps(frame.truth, default=lambda v: v.tolist()))
     return obj, frame, calibration_from_frame_truth(truth)
 
@@ -173,7 +177,7 @@ def test_the_lens_aperture_shifts_only_the_defocused_views(rendered):
     shift = {}
     for name, cam in cams.items():
         f = simulate_frame(dataclasses.replace(rig, camera=cam), obj, spp=16, seed=11,
-                           thin_lens=True)
+                           thin_lens=True, support="full")
         r = radii(f.image, cal)
         shift[name] = {v: 1e3 * float(np.nanmean(r[v] - pin[v])) for v in pin}
     assert abs(shift["front"]["direct"]) < 0.3, shift

@@ -46,7 +46,8 @@ from lts360.recon.triangulation.interp import prefilter
 from lts360.recon.triangulation.inverse import (DEFAULT_ACCEPT, InversePlan, InverseResult, assemble_view,
                                   compensation_of, default_saturation, default_threshold)
 from lts360.recon.triangulation.peaks import (DEFAULT_MAX_PLATEAU_MM, DEFAULT_SECOND_PEAK_FRACTION,
-                                              PeakResult, Quality, plateau_samples)
+                                              SATURATION_RTOL, PeakResult, Quality,
+                                              plateau_samples)
 
 __all__ = ["FastInverse", "window_layout"]
 
@@ -169,7 +170,8 @@ def _walk_profiles(dr, mod, sample, n: int, nr: int, threshold: float,
     """
     Float, UInt32, Bool = mod.Float, mod.UInt32, mod.Bool
     thr = dr.opaque(Float, threshold)
-    sat = dr.opaque(Float, float("inf") if saturation is None else saturation)
+    sat = dr.opaque(Float, float("inf") if saturation is None
+                    else saturation * (1.0 - SATURATION_RTOL))
 
     def close(ending, right_cut, cur, best, other):
         """Fold the current run into (best, other) where ``ending``; ``right_cut``: the run
@@ -275,9 +277,30 @@ class FastInverse:
         self._fy = mod.Float(fy)
         self._taps = mod.UInt32(taps.ravel())
 
-    def _tap_table(self, img: np.ndarray):
+    def _device_image(self, image):
+        """``image`` if it is a Dr.Jit tensor of this backend (checked), else ``None``."""
+        dr = self.dr
+        if not dr.is_tensor_v(image):
+            return None
+        if dr.backend_v(image) != dr.backend_v(self.mod.Float):
+            raise ValueError(f"image is a {type(image).__name__} of another Dr.Jit backend than "
+                             f"this plan's {self.backend!r}")
+        if tuple(image.shape) != self.shape:
+            raise ValueError(f"image has shape {tuple(image.shape)}, the plan was built for "
+                             f"{self.shape}")
+        return image
+
+    def _tap_table(self, img):
         """``(16 n_windows,)`` floats: the taps of every window in this image."""
         dr, mod = self.dr, self.mod
+        dev = self._device_image(img)
+        if dev is not None and self.interpolation == "keys":
+            # Already on the device: the gather reads it there (uint8 converted after).
+            table = mod.Float(dr.gather(type(dev.array), dev.array, self._taps))
+            dr.eval(table)
+            return table
+        if dev is not None:  # the B-spline prefilter runs on the host
+            img = dev.numpy()
         if self.interpolation == "bspline":
             img = prefilter(img, "bspline")  # B-spline coefficients, on the host (scipy)
         flat = np.ascontiguousarray(img).ravel()
@@ -320,9 +343,11 @@ class FastInverse:
         """Per view: the centroid peak of every windowed θ (numpy arrays on return), radii on
         the grid's base radii ``grid.r_mm`` (:func:`assemble_view` adds the per-θ shift)."""
         dr = self.dr
-        img = np.asarray(image)
-        if img.shape != self.shape:
-            raise ValueError(f"image has shape {img.shape}, the plan was built for {self.shape}")
+        img = self._device_image(image)
+        if img is None:
+            img = np.asarray(image)
+            if img.shape != self.shape:
+                raise ValueError(f"image has shape {img.shape}, the plan was built for {self.shape}")
         if self._n_rows == 0:
             return {name: PeakResult(r_mm=np.zeros(0), quality=np.zeros(0, np.uint8),
                                      intensity=np.zeros(0)) for name in self._rows}
@@ -348,10 +373,28 @@ class FastInverse:
     def __call__(self, image, *, threshold: float | None = None, saturation: float | None = None,
                  accept=DEFAULT_ACCEPT, compensate: bool = False) -> InverseResult:
         """Same result as ``inverse_triangulate(image, cal, grid, peak="centroid", plan=plan,
-        compensate=compensate)`` (to float32 rounding)."""
-        img = np.asarray(image)
-        thr = default_threshold(img) if threshold is None else float(threshold)
-        sat = default_saturation(img) if saturation is None else float(saturation)
+        compensate=compensate)`` (to float32 rounding).
+
+        ``image`` : (H, W) array, or a Dr.Jit tensor of this backend (``TensorXu8``,
+        ``TensorXf``) already on the device — a rendered frame that never left it: only the
+        per-θ results are read back (and, for a float tensor without ``threshold``, its
+        maximum)."""
+        img = self._device_image(image)
+        if img is None:
+            img = np.asarray(image)
+            thr = default_threshold(img) if threshold is None else float(threshold)
+            sat = default_saturation(img) if saturation is None else float(saturation)
+        else:  # the defaults of the numpy image: full scale of an integer type, else its max
+            integer = {self.dr.VarType.UInt8: 255.0, self.dr.VarType.UInt16: 65535.0}.get(
+                self.dr.type_v(img))
+            if threshold is not None:
+                thr = float(threshold)
+            elif integer is not None:
+                thr = default_threshold(np.zeros(0, np.uint8 if integer == 255.0 else np.uint16))
+            else:  # one scalar read back (a float image's maximum)
+                peak = float(self.dr.max(img.array)[0]) if self.dr.width(img.array) else 0.0
+                thr = default_threshold(np.array([max(peak, 0.0)], np.float32))
+            sat = (integer if saturation is None else float(saturation))
         if sat is not None and sat <= thr:
             sat = None
         peaks = self.peaks(img, threshold=thr, saturation=sat)

@@ -57,9 +57,14 @@ from scipy.ndimage import gaussian_filter1d
 
 __all__ = ["Quality", "PeakResult", "MainRun", "main_run", "centroid", "gauss", "steger",
            "PEAK_DETECTORS", "detect_peaks", "steger_sigma_mm", "DEFAULT_SECOND_PEAK_FRACTION",
-           "DEFAULT_MAX_PLATEAU_MM", "plateau_samples"]
+           "DEFAULT_MAX_PLATEAU_MM", "plateau_samples", "SATURATION_RTOL"]
 
 DEFAULT_SECOND_PEAK_FRACTION = 0.5
+#: A sample counts as saturated from ``saturation · (1 − SATURATION_RTOL)`` on: cubic
+#: interpolation of taps that are all at full scale returns full scale only to rounding
+#: (±1e-7 relative in float32, ±1e-16 in float64), and the count of a plateau's samples must
+#: not depend on it (the float32 kernel and the float64 reference flag the same θ).
+SATURATION_RTOL = 1e-5
 #: Widest saturated plateau (along the radius) still located: about the line's standard
 #: deviation along the grid ray on the paper rig (0.1–0.2 mm, the 0.6 mm sheet seen at α ≈ 40°).
 DEFAULT_MAX_PLATEAU_MM = 0.15
@@ -228,9 +233,10 @@ def main_run(profiles, threshold: float, *, saturation: float | None = None,
     truncated = has & (at_left | at_right)
     quality = np.full(n, Quality.FOUND, dtype=np.uint8)
     if saturation is not None:
-        quality[has & (peak >= saturation)] = Quality.SATURATED
+        sat = saturation * (1.0 - SATURATION_RTOL)
+        quality[has & (peak >= sat)] = Quality.SATURATED
         if max_plateau is not None:
-            wide = (run & (vals >= saturation)).sum(axis=1) > max_plateau
+            wide = (run & (vals >= sat)).sum(axis=1) > max_plateau
             quality[has & wide] = Quality.SATURATED_PLATEAU
     quality[several] = Quality.SEVERAL_PEAKS
     quality[truncated] = Quality.TRUNCATED

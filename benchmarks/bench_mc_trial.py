@@ -1,0 +1,76 @@
+"""Monte Carlo trials on the CPU: the wall time of ``mc_trial`` (sensor noise, speckle,
+calibration draw, inverse triangulation) per trial, for an estimate of a 1000-trial run.
+
+Set-up (``--setup DIR``): the study's placement renders and the true calibration, as
+``benchmarks/gpu_check.py``'s ``mc_setup``; it is written once and reused, so that two
+checkouts ("before" and "after", ``PYTHONPATH`` at each ``src``) time their trials on the same
+renders.  Trials run one after another in this process (one core): the estimate for 1000
+trials on ``c`` cores is ``1000 × median / c`` (the study's pool runs one trial per core).
+
+Usage: python benchmarks/bench_mc_trial.py --setup DIR [--placements 2] [--trials 8]
+       [--theta-step-deg 0.5] [--json OUT]
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import os
+import statistics
+import time
+from pathlib import Path
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--setup", required=True)
+    ap.add_argument("--placements", type=int, default=2)
+    ap.add_argument("--spp", type=int, default=16)
+    ap.add_argument("--trials", type=int, default=8)
+    ap.add_argument("--theta-step-deg", type=float, default=0.5)
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args(argv)
+
+    import mitsuba as mi
+
+    mi.set_variant("llvm_ad_mono")
+    import lts360
+    from lts360.experiments.monte_carlo import mc_trial
+    from lts360.experiments.runner import plan_trials
+
+    root = Path(__file__).resolve().parent
+    spec = importlib.util.spec_from_file_location("gpu_check", root / "gpu_check.py")
+    gc = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(gc)
+    setup = Path(args.setup)
+    base_file = setup / "base.json"
+    if base_file.is_file():
+        base = json.loads(base_file.read_text())
+    else:
+        setup.mkdir(parents=True, exist_ok=True)
+        t0 = time.perf_counter()
+        base = gc.mc_setup(setup, args.placements, args.spp)
+        base["setup_s"] = time.perf_counter() - t0
+        base_file.write_text(json.dumps(base, indent=2))
+    params = {k: v for k, v in base.items() if k != "setup_s"}
+    trials = plan_trials([dict(params, theta_step_deg=args.theta_step_deg)] * (args.trials + 1),
+                         seed=0)
+    times = []
+    for t in trials:
+        t0 = time.perf_counter()
+        mc_trial(t)
+        times.append(time.perf_counter() - t0)
+    cores = os.cpu_count() or 1
+    med = statistics.median(times[1:])
+    out = {"code": str(Path(lts360.__file__).resolve().parents[2]), "first_s": times[0],
+           "median_s": med, "warm_s": times[1:], "estimate_1000_s": 1000 * med / cores,
+           "cores": cores, "load_average": os.getloadavg(), "setup_s": base.get("setup_s")}
+    text = json.dumps(out, indent=2)
+    print(text)
+    if args.json:
+        Path(args.json).write_text(text)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,99 @@
+"""Render what is measured: the full frame and the pixel support side by side.
+
+Paper rig, plug gauge, 1280×1024, ``llvm_ad_mono`` by default.  Rows (wall clock, median of
+the warm calls; the first call, which compiles, apart):
+
+* ``frame_realistic_16``: :func:`simulate_frame` at 16 spp with realistic noise and speckle,
+  the default (the pixel support, when the code has one);
+* ``frame_realistic_16_full``: the same with ``support="full"`` (every pixel);
+* ``frame_noise_free_256``: :func:`simulate_frame` at 256 spp without noise, the default;
+* ``frame_realistic_16_reused``: the first row on a scene built once (``SceneCache``: the
+  scene and the support are looked up, as a study's repeated frames do);
+* ``render_full_16``: :func:`render_radiance`, the full frame alone.
+
+Run it with ``PYTHONPATH`` at another checkout's ``src`` to measure that code ("before"):
+rows its ``simulate_frame`` cannot make (no ``support`` argument) are left out.
+
+Usage: python benchmarks/bench_support.py [--repeats 3] [--rows a,b] [--json OUT]
+"""
+
+from __future__ import annotations
+
+import argparse
+import inspect
+import json
+import os
+import platform
+import statistics
+import subprocess
+import time
+from pathlib import Path
+
+ROWS = ("frame_realistic_16", "frame_realistic_16_full", "frame_noise_free_256",
+        "frame_realistic_16_reused", "render_full_16")
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--variant", default="llvm_ad_mono")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--rows", default=",".join(ROWS))
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args(argv)
+
+    import mitsuba as mi
+
+    mi.set_variant(args.variant)
+    import lts360
+    from lts360.scenes.objects import build_object
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.frame import simulate_frame
+    from lts360.simulator.render import render_radiance
+    from lts360.simulator.scene import SceneSpec, object_meshes
+
+    src = Path(lts360.__file__).resolve().parents[2]
+    try:
+        commit = subprocess.run(["git", "-C", str(src), "rev-parse", "--short", "HEAD"],
+                                capture_output=True, text=True).stdout.strip()
+    except OSError:
+        commit = "?"
+    has_support = "support" in inspect.signature(simulate_frame).parameters
+    rig, obj = load_rig("paper"), build_object("plug-gauge")
+    spec = SceneSpec(rig, object_meshes(obj), ambient="off")
+    fns = {"render_full_16": lambda: render_radiance(spec, spp=16, seed=1)}
+    fns["frame_realistic_16"] = lambda: simulate_frame(rig, obj, spp=16, seed=1, noise="realistic")
+    fns["frame_noise_free_256"] = lambda: simulate_frame(rig, obj, spp=256, seed=1, noise="none")
+    if has_support:
+        from lts360.simulator.reuse import SceneCache
+
+        cache = SceneCache()
+        fns["frame_realistic_16_full"] = lambda: simulate_frame(
+            rig, obj, spp=16, seed=1, noise="realistic", support="full")
+        fns["frame_realistic_16_reused"] = lambda: simulate_frame(
+            rig, obj, spp=16, seed=1, noise="realistic", scenes=cache)
+    out = {"code": str(src), "commit": commit, "variant": args.variant,
+           "machine": f"{platform.node()} {os.cpu_count()} cores",
+           "load_average": os.getloadavg(), "rows": {}}
+    for name in args.rows.split(","):
+        if name not in fns:
+            continue
+        t0 = time.perf_counter()
+        fns[name]()
+        first = time.perf_counter() - t0
+        warm = []
+        for _ in range(max(1, args.repeats)):
+            t0 = time.perf_counter()
+            fns[name]()
+            warm.append(time.perf_counter() - t0)
+        out["rows"][name] = {"first_s": round(first, 4), "median_s": round(statistics.median(warm), 4),
+                             "warm_s": [round(w, 4) for w in warm]}
+        print(name, out["rows"][name], flush=True)
+    out["load_average_after"] = os.getloadavg()
+    text = json.dumps(out, indent=2)
+    print(text)
+    if args.json:
+        Path(args.json).write_text(text)
+
+
+if __name__ == "__main__":
+    main()

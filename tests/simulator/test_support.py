@@ -1,0 +1,216 @@
+"""The pixel support: it holds every pixel with laser light, and a frame rendered on it is the
+full frame's (statistics, measured radius); a reused scene renders as a fresh one."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+mi = pytest.importorskip("mitsuba", reason="the simulator needs Mitsuba 3")
+
+from lts360.scenes.objects import build_object, object_types  # noqa: E402
+from lts360.scenes.rig_io import load_rig  # noqa: E402
+
+#: Small frames: the support is a geometric statement, it holds at any scale.
+SCALE = 0.25
+
+
+@pytest.fixture(scope="module")
+def variant():
+    if "llvm_ad_mono" not in mi.variants():
+        pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
+    mi.set_variant("llvm_ad_mono")
+
+
+@pytest.fixture(scope="module")
+def rig():
+    return load_rig("paper")
+
+
+def _spec(rig, obj, z_mm=0.0):
+    from lts360.simulator.frame import stage_transform
+    from lts360.simulator.materials import material_to_bsdf
+    from lts360.simulator.scene import SceneSpec
+
+    mesh = obj.mesh_world()
+    mesh.apply_transform(stage_transform(z_mm))
+    return SceneSpec(rig, (("object", mesh, material_to_bsdf(obj.material)),))
+
+
+@pytest.mark.parametrize("name", list(object_types()))
+def test_support_holds_every_pixel_with_laser_light(variant, rig, name):
+    """A full render of every catalog object: no pixel outside the geometric support carries
+    laser radiance above 1e-4 of the stripe's peak (the integrator's sheet is cut at
+    exp(-16.1), so outside the slabs it is exactly 0), and the support is a small part of the
+    frame."""
+    from lts360.simulator.render import render_radiance
+    from lts360.simulator.support import geometric_support
+
+    spec = _spec(rig, build_object(name))
+    sup = geometric_support(spec, scale=SCALE)
+    res = render_radiance(spec, spp=4, seed=3, scale=SCALE)
+    laser = res.laser_W_m2_sr
+    peak = float(laser.max())
+    assert peak > 0
+    assert float(laser[~sup.mask].max(initial=0.0)) <= 1e-4 * peak
+    # At this scale the 2 px margin and the blur dominate: still far below the whole frame.
+    assert 0.005 < sup.fraction < 0.15
+
+
+@pytest.mark.parametrize("noise", ["none", "realistic"])
+def test_support_frame_has_the_full_frames_statistics(variant, rig, noise):
+    """Plug gauge, both noise modes: outside the support the band frame's pixels are the full
+    frame's (no light: the sensor's dark signal alone; identical without noise), and on the
+    support the laser radiance has the full render's mean and spread (another realisation)."""
+    from lts360.simulator.frame import simulate_frame
+
+    obj = build_object("plug-gauge:x=0.4")
+    # The exposure auto-exposure picks here (the brightest stripe pixels at 80 % of full scale).
+    kw = dict(spp=16, seed=2, noise=noise, scale=0.5, exposure_time_s=2.75e-4)
+    band = simulate_frame(rig, obj, **kw)
+    full = simulate_frame(rig, obj, support="full", **kw)
+    assert band.truth["render"]["support"]["method"] == "geometric"
+    assert full.truth["render"]["support"]["method"] == "full"
+    from lts360.simulator.support import geometric_support
+
+    mask = geometric_support(_spec(rig, obj), scale=0.5).mask
+    assert np.array_equal(band.render.laser_W_m2_sr > 0, (band.render.laser_W_m2_sr > 0) & mask)
+    out_b, out_f = band.image[~mask].astype(float), full.image[~mask].astype(float)
+    if noise == "none":
+        assert np.array_equal(out_b, out_f)
+    else:  # ~1e6 dark pixels: the means agree to 0.02 DN, the spreads to 2 %
+        assert out_b.mean() == pytest.approx(out_f.mean(), abs=0.02)
+        assert out_b.std() == pytest.approx(out_f.std(), rel=0.02)
+    lb = band.render.laser_W_m2_sr[mask].astype(float)
+    lf = full.render.laser_W_m2_sr[mask].astype(float)
+    assert float(full.render.laser_W_m2_sr[~mask].max(initial=0.0)) == 0.0
+    # 16 spp on ~900 lit pixels: the summed stripe agrees to 1 % (render noise), the brightest
+    # pixels to 5 %.
+    assert lb.sum() == pytest.approx(lf.sum(), rel=0.01)
+    assert np.percentile(lb, 99.5) == pytest.approx(np.percentile(lf, 99.5), rel=0.05)
+    if noise == "realistic":  # speckle and shot noise on the stripe: the same contrast
+        lit = lf > 0.2 * lf.max()
+        ib, if_ = band.image[mask][lit].astype(float), full.image[mask][lit].astype(float)
+        assert ib.mean() == pytest.approx(if_.mean(), rel=0.05)
+        assert ib.std() / ib.mean() == pytest.approx(if_.std() / if_.mean(), rel=0.15)
+
+
+def test_window_and_support_intersect(variant, rig):
+    """A window (a study's band) with the default support renders only their intersection;
+    with ``support="full"`` the whole window, as before."""
+    from lts360.simulator.frame import simulate_frame
+    from lts360.simulator.render import window_pixels
+
+    obj = build_object("plug-gauge")
+    px = window_pixels([(0, 0, 320, 128)])
+    f = simulate_frame(rig, obj, spp=4, seed=1, scale=0.25, pixels_xy=px)
+    g = simulate_frame(rig, obj, spp=4, seed=1, scale=0.25, pixels_xy=px, support="full")
+    assert 0 < f.truth["render"]["support"]["pixels"] < g.truth["render"]["support"]["pixels"]
+    assert g.truth["render"]["support"]["pixels"] == 320 * 128
+    assert np.all(f.render.laser_W_m2_sr[128:] == 0) and np.all(g.render.laser_W_m2_sr[128:] == 0)
+
+
+def test_ambient_fills_the_pixels_outside_the_support(variant, rig):
+    """With ambient light on, the pixels outside the support hold the ambient radiance (one
+    low-spp ambient render), not black."""
+    from lts360.simulator.frame import simulate_frame
+    from lts360.simulator.support import geometric_support
+
+    obj = build_object("plug-gauge")
+    band = simulate_frame(rig, obj, spp=4, seed=1, scale=0.25, ambient="dim",
+                          exposure_time_s=2e-3)
+    full = simulate_frame(rig, obj, spp=4, seed=1, scale=0.25, ambient="dim", support="full",
+                          exposure_time_s=2e-3)
+    mask = geometric_support(_spec(rig, obj), scale=0.25).mask
+    a, b = band.render.radiance_W_m2_sr[~mask], full.render.radiance_W_m2_sr[~mask]
+    assert a.mean() > 0
+    # The ambient render (4 spp) and the full render (4 spp) are two realisations of the same
+    # image: their means over ~75 000 pixels agree to 1 %.
+    assert a.mean() == pytest.approx(b.mean(), rel=0.01)
+
+
+def test_support_is_refused_bad_input(variant, rig):
+    from lts360.simulator.frame import simulate_frame
+
+    with pytest.raises(ValueError, match="support must be one of"):
+        simulate_frame(rig, build_object("plug-gauge"), spp=1, scale=0.25, support="band")
+
+
+def test_pilot_support_holds_the_laser_light(variant, rig):
+    """The pilot support (a 4-spp render of the real integrator) holds every pixel a 16-spp
+    render lights above 1e-4 of its peak."""
+    from lts360.simulator.render import render_radiance
+    from lts360.simulator.support import pilot_support
+
+    spec = _spec(rig, build_object("cube"))
+    sup = pilot_support(spec, scale=SCALE, seed=5)
+    laser = render_radiance(spec, spp=16, seed=6, scale=SCALE).laser_W_m2_sr
+    assert float(laser[~sup.mask].max(initial=0.0)) <= 1e-4 * float(laser.max())
+    assert sup.method == "pilot" and sup.fraction < 0.2
+
+
+def test_reused_scene_renders_as_a_fresh_one(variant, rig):
+    """Build once, render many: a cached scene whose object moved (another stage height)
+    gives the image a freshly loaded scene gives with the same seed."""
+    from lts360.simulator.frame import render_frame
+    from lts360.simulator.reuse import SceneCache
+
+    obj = build_object("plug-gauge:x=0.3")
+    cache = SceneCache()
+    kw = dict(spp=4, seed=9, scale=SCALE)
+    render_frame(_spec(rig, obj, z_mm=0.0), scenes=cache, **kw)
+    moved = _spec(rig, obj, z_mm=2.0)
+    reused, sup_r = render_frame(moved, scenes=cache, **kw)
+    fresh, sup_f = render_frame(moved, scenes=SceneCache(), **kw)
+    assert (cache.loads, cache.reuses) == (1, 1)
+    assert np.array_equal(sup_r.mask, sup_f.mask)
+    assert fresh.laser_W_m2_sr.max() > 0
+    # float32 vertices written through mi.traverse or read from the PLY: the same numbers.
+    np.testing.assert_allclose(reused.radiance_W_m2_sr, fresh.radiance_W_m2_sr, rtol=1e-5,
+                               atol=1e-6 * float(fresh.radiance_W_m2_sr.max()))
+    # Another object (other faces) is not forced into the cached scene.
+    render_frame(_spec(rig, build_object("cube")), scenes=cache, **kw)
+    assert cache.loads == 2
+
+
+@pytest.mark.slow
+def test_band_frame_and_full_frame_measure_the_same_radius(variant, rig):
+    """The plug gauge at full resolution, 16 spp, noise-free: the band-rendered frame and the
+    full frame give the same mean radius within the render noise (their difference is below
+    3 × the standard error of the two means)."""
+    from pathlib import Path
+
+    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.measure import Section, measure_sections
+    from lts360.simulator.frame import simulate_frame
+    from lts360.simulator.io import rig_truth
+
+    obj = build_object("plug-gauge")
+    cal = calibration_from_frame_truth(rig_truth(rig, rig.camera.K, rig.camera.image_size))
+    grid = CylGrid.from_ranges((9.0, 11.0), theta_step_deg=1.0, r_step_mm=0.01)
+    radii = {}
+    for support in ("geometric", "full"):
+        frame = simulate_frame(rig, obj, spp=16, seed=4, noise="none", support=support)
+        cloud = measure_sections([Section(Path("f"), 0.0, image=frame.image)], cal, grid)
+        r = cloud.radius_mm[np.isfinite(cloud.radius_mm)]
+        assert r.size > 200
+        radii[support] = r
+    a, b = radii["geometric"], radii["full"]
+    se = np.hypot(a.std() / np.sqrt(a.size), b.std() / np.sqrt(b.size))
+    assert abs(a.mean() - b.mean()) < 3 * se + 1e-4
+
+
+def test_cli_renders_the_support_by_default_and_the_full_frame_on_request(variant, tmp_path):
+    """``lts360 render`` renders the support; ``--full-frame`` every pixel; a scan builds its
+    scene once (each section moves the object)."""
+    import json
+
+    from lts360.cli import main
+
+    for extra, method in (([], "geometric"), (["--full-frame"], "full")):
+        out = tmp_path / method
+        assert main(["render", "--object", "plug-gauge", "--out", str(out), "--scale", "0.125",
+                     "--spp", "1", "--sections", "2", "--pitch-mm", "0.5"] + extra) == 0
+        truth = json.loads((out / "section_0001" / "frame.json").read_text())
+        assert truth["render"]["support"]["method"] == method
