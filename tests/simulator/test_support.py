@@ -37,8 +37,27 @@ def _spec(rig, obj, z_mm=0.0):
     return SceneSpec(rig, (("object", mesh, material_to_bsdf(obj.material)),))
 
 
+def _object(name, tmp_path):
+    """A catalog object, or for a user's part (``mesh``, ``profile``) a hexagonal bar written
+    to a file (16 mm across flats)."""
+    if not object_types()[name].from_file:
+        return build_object(name)
+    import trimesh
+
+    if name == "mesh":
+        path = tmp_path / "hex.stl"
+        trimesh.creation.cylinder(radius=16.0 / np.sqrt(3.0), height=30.0,
+                                  sections=6).export(path)
+        return build_object(f"mesh:path={path}")
+    a = np.radians(np.arange(7) * 60.0 + 30.0)  # closed: the first point repeated
+    path = tmp_path / "hex.csv"
+    path.write_text("\n".join(f"{x:.9f},{y:.9f}" for x, y in
+                              16.0 / np.sqrt(3.0) * np.column_stack([np.cos(a), np.sin(a)])))
+    return build_object(f"{name}:path={path},length=30")
+
+
 @pytest.mark.parametrize("name", list(object_types()))
-def test_support_holds_every_pixel_with_laser_light(variant, rig, name):
+def test_support_holds_every_pixel_with_laser_light(variant, rig, name, tmp_path):
     """A full render of every catalog object: no pixel outside the geometric support carries
     laser radiance above 1e-4 of the stripe's peak (the integrator's sheet is cut at
     exp(-16.1), so outside the slabs it is exactly 0), and the support is a small part of the
@@ -46,7 +65,7 @@ def test_support_holds_every_pixel_with_laser_light(variant, rig, name):
     from lts360.simulator.render import render_radiance
     from lts360.simulator.support import geometric_support
 
-    spec = _spec(rig, build_object(name))
+    spec = _spec(rig, _object(name, tmp_path))
     sup = geometric_support(spec, scale=SCALE)
     res = render_radiance(spec, spp=4, seed=3, scale=SCALE)
     laser = res.laser_W_m2_sr
