@@ -30,7 +30,7 @@ def main() -> None:
     import mitsuba as mi
 
     mi.set_variant("llvm_ad_mono")
-    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.recon.model import calibration_from_frame_truth
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
     from lts360.scenes.objects import build_object

@@ -31,7 +31,7 @@ def main() -> None:
     import mitsuba as mi
 
     mi.set_variant("llvm_ad_mono")
-    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.recon.model import calibration_from_frame_truth
     from lts360.recon.triangulation.measure import Section, measure_sections_following
     from lts360.scenes.objects import build_object
     from lts360.scenes.rig_io import load_rig

@@ -323,7 +323,7 @@ def support_rows(rig, obj, size: dict) -> tuple[list[dict], dict]:
 
 def standard_frame(rig, obj, scale: float):
     """The 16-spp frame with realistic noise and speckle, and its true calibration."""
-    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.recon.model import calibration_from_frame_truth
     from lts360.simulator.frame import simulate_frame
 
     frame = simulate_frame(rig, obj, spp=16, seed=1, noise="realistic", scale=scale)
@@ -354,8 +354,8 @@ def section_grid(theta_step_deg: float):
 def recon_rows(image, cal, backend: str, size: dict) -> tuple[list[dict], dict]:
     """Rows of part 2: plan and setup times, ms per section, agreement with LLVM and numpy."""
     from lts360.recon.triangulation.fast import FastInverse
-    from lts360.recon.triangulation.inverse import (default_saturation, default_threshold,
-                                                    inverse_triangulate, plan_inverse)
+    from lts360.recon.images import default_saturation, default_threshold
+    from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
 
     grid = section_grid(size["theta_step_deg"])
     t0 = time.perf_counter()
@@ -410,7 +410,7 @@ def mc_setup(out_dir: Path, placements: int, spp: int, rig_name: str = "paper") 
     :func:`run_monte_carlo_study` builds them, minus ``theta_step_deg``.
     """
     from lts360.experiments.monte_carlo import _render_placements
-    from lts360.recon.calibration.model import calibration_from_frame_truth, save_calibration
+    from lts360.recon.model import calibration_from_frame_truth, save_calibration
 
     renders = _render_placements(out_dir, placements, rig=rig_name, seed=0, spp=spp,
                                  say=lambda _msg: None)

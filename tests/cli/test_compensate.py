@@ -18,7 +18,7 @@ def _offsets(path):
 
 
 def test_offsets_follow_a_shifted_mirror(tmp_path, capsys):
-    from lts360.recon.calibration.model import load_calibration, save_calibration
+    from lts360.recon.model import load_calibration, save_calibration
 
     ref = tmp_path / "ref"
     assert main(["render", "--object", "plug-gauge", "--out", str(ref), "--spp", "16",
@@ -79,7 +79,7 @@ def test_mastering_sets_the_size_and_its_u_reaches_inspect(gauge_ref, tmp_path, 
     same image reads the master's radius (the fit forces it; measured: see below), and the
     master's diameter u is counted in inspect's U."""
     from lts360.geometry.fit import fit_circle
-    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.model import load_calibration
     from lts360.recon.triangulation.cloud import read_cloud
 
     d = 19.9987

@@ -16,7 +16,7 @@ def truth_calibration(tmp_path_factory):
     if "llvm_ad_mono" not in mi.variants():
         pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
     mi.set_variant("llvm_ad_mono")
-    from lts360.recon.calibration.model import calibration_from_frame_truth, save_calibration
+    from lts360.recon.model import calibration_from_frame_truth, save_calibration
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.io import rig_truth
 

@@ -29,7 +29,7 @@ def _scan(name: str, seed: int) -> tuple[dict, dict]:
     rejection; score both."""
     from lts360.experiments.examples_study import PAPER_EXAMPLES
     from lts360.experiments.score import score_cloud
-    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.recon.model import calibration_from_frame_truth
     from lts360.recon.triangulation.measure import Section, measure_sections_following
     from lts360.scenes.objects import build_object
     from lts360.scenes.rig_io import load_rig

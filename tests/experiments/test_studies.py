@@ -114,7 +114,7 @@ def test_monte_carlo_compensates_nominal_and_drawn_calibrations_alike(tmp_path,
     and the nominal one used the file's offsets (none here): the two differed."""
     from lts360.experiments.monte_carlo import _render_placements, mc_trial
     from lts360.experiments.runner import Trial
-    from lts360.recon.calibration.model import load_calibration, save_calibration
+    from lts360.recon.model import load_calibration, save_calibration
 
     path = tmp_path / "calibration.json"
     save_calibration(path, dataclasses.replace(load_calibration(truth_calibration),
@@ -144,7 +144,7 @@ def test_monte_carlo_compensates_nominal_and_drawn_calibrations_alike(tmp_path,
 
 def test_the_gauge_study_compensates_from_several_shots(tmp_path, truth_calibration):
     from lts360.experiments.gauge_study import _compensated_calibration
-    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.model import load_calibration
 
     path = _compensated_calibration(truth_calibration, tmp_path, rig="paper", noise="none",
                                     spp=2, seed=0, shots=2)
@@ -158,7 +158,7 @@ def test_the_gauge_study_compensates_from_several_shots(tmp_path, truth_calibrat
 
 def test_the_gauge_study_masters_with_the_gauge_diameter(tmp_path, truth_calibration):
     from lts360.experiments.gauge_study import GAUGE_DIAMETER_MM, _compensated_calibration
-    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.model import load_calibration
 
     path = _compensated_calibration(truth_calibration, tmp_path, rig="paper", noise="none",
                                     spp=2, seed=0, shots=1, master=True)
@@ -211,7 +211,7 @@ def test_a_calibration_rewritten_under_the_same_name_is_read_again(tmp_path, tru
     import shutil
 
     from lts360.experiments.gauge_study import _plan
-    from lts360.recon.calibration.model import load_calibration, save_calibration
+    from lts360.recon.model import load_calibration, save_calibration
 
     path = tmp_path / "calibration.json"
     shutil.copy(truth_calibration, path)

@@ -14,7 +14,7 @@ from _profiles import polar
 
 @pytest.fixture(scope="module")
 def cal():
-    from lts360.recon.calibration.model import calibration_from_dict
+    from lts360.recon.model import calibration_from_dict
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.io import rig_truth
 

@@ -148,11 +148,21 @@ def test_recon_reads_images_and_calibrations_only():
     assert bad == set()
 
 
-def test_triangulation_does_not_import_the_calibration_procedures():
-    bad = {t for t in _imports_of("lts360.recon.triangulation")
-           if t.startswith("lts360.recon.calibration") and t not in
-           ("lts360.recon.calibration", "lts360.recon.calibration.model")}
-    assert bad == set()
+def test_calibration_and_triangulation_import_neither_each_other():
+    """The two parts of recon stand side by side on what both need (recon.model, images,
+    lines, view_points)."""
+    for part, other in (("lts360.recon.triangulation", "lts360.recon.calibration"),
+                        ("lts360.recon.calibration", "lts360.recon.triangulation")):
+        bad = {t for t in _imports_of(part) if t == other or t.startswith(other + ".")}
+        assert bad == set(), part
+
+
+def test_recon_shared_modules_import_neither_part():
+    for m in ("lts360.recon.model", "lts360.recon.images", "lts360.recon.lines",
+              "lts360.recon.view_points"):
+        bad = {t for t in import_graph()[m] if t.startswith(("lts360.recon.calibration",
+                                                             "lts360.recon.triangulation"))}
+        assert bad == set(), m
 
 
 def test_geometry_and_scenes_do_not_import_the_layers_above():

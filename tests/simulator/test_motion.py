@@ -147,7 +147,7 @@ def test_rolling_shutter_shifts_each_view_of_a_tilted_cylinder_as_predicted(vari
     # moving frame lands where it does for the frozen points so moved: within 5 % of the move.
     from scipy.optimize import least_squares
 
-    from lts360.recon.calibration.model import calibration_from_dict
+    from lts360.recon.model import calibration_from_dict
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.recon.triangulation.views import get_views, project_meas_points
@@ -206,7 +206,7 @@ def test_measure_tags_each_point_with_its_rows_time_and_z(variant, paper, tmp_pa
     # A rolling-shutter frame written to disk and measured: every point carries the time of
     # its own row (from the acquisition in frame.json, not the truth) and the section's
     # height then; the mirror views (upper rows) come before the direct view.
-    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.model import load_calibration
     from lts360.recon.triangulation.cloud import VIEW_CODES, read_cloud, write_cloud
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.measure import collect_sections, measure_sections

@@ -199,7 +199,7 @@ def test_band_frame_and_full_frame_measure_the_same_radius(variant, rig):
     3 × the standard error of the two means)."""
     from pathlib import Path
 
-    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.recon.model import calibration_from_frame_truth
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.measure import Section, measure_sections
     from lts360.simulator.frame import simulate_frame

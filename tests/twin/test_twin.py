@@ -93,7 +93,7 @@ def test_prism_is_watertight_with_the_profile_as_its_section():
 def test_twin_rig_reproduces_the_calibration(paper_rig):
     """The twin of a perfect calibration is the true rig: the same camera projection, mirror
     planes and laser plane (the calibration made from the twin equals the first)."""
-    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.recon.model import calibration_from_frame_truth
     from lts360.simulator.io import rig_truth
     from lts360.twin.rig import twin_rig
 
@@ -131,7 +131,7 @@ def test_twin_rig_lights_through_mirrors_made_perpendicular(paper_rig):
     estimated calibration carries) is accepted: the camera side keeps the calibrated mirror,
     the laser side turns it about its line in the sheet until perpendicular (the same line,
     so the reflected sheet stays in the plane); the true calibration's laser side is its own."""
-    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.recon.model import calibration_from_frame_truth
     from lts360.simulator.io import rig_truth
     from lts360.twin.rig import laser_side_mirrors, twin_rig
 
@@ -158,7 +158,7 @@ def test_twin_rig_lights_through_mirrors_made_perpendicular(paper_rig):
 
 
 def test_twin_rig_refuses_mirrors_far_from_perpendicular(paper_rig):
-    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.recon.model import calibration_from_frame_truth
     from lts360.simulator.io import rig_truth
     from lts360.twin.rig import twin_rig
 
@@ -184,7 +184,7 @@ def test_perturbed_design_moves_one_input(paper_rig):
 def test_twin_rig_refuses_a_foreign_frame(paper_rig):
     import dataclasses
 
-    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.recon.model import calibration_from_frame_truth
     from lts360.simulator.io import rig_truth
     from lts360.twin.rig import twin_rig
 
@@ -228,7 +228,7 @@ def _gauge_errors(cloud, c=(2.0, 0.0), r_true=6.0):
 
 
 def test_the_twin_removes_the_line_centre_bias_of_a_rendered_gauge(small_gauge_frame):
-    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.model import load_calibration
     from lts360.recon.triangulation.measure import Section, measure_sections_following
     from lts360.scenes.rig_io import load_rig
     from lts360.twin import TwinCorrector
@@ -413,7 +413,7 @@ def test_a_calibration_without_optics_loads_and_the_twin_asks_for_the_rig(
     import json
 
     from lts360.cli import main
-    from lts360.recon.calibration.model import calibration_to_dict, load_calibration
+    from lts360.recon.model import calibration_to_dict, load_calibration
 
     cal = load_calibration(small_gauge_frame / "frame.json")
     assert cal.optics["rig"] == "paper" and "[design]" in cal.optics["rig_toml"]
@@ -445,7 +445,7 @@ def test_a_twin_rig_of_another_design_is_refused(small_gauge_frame, tmp_path, ca
 def test_twin_design_takes_the_recorded_rig_and_an_override_of_the_same_design(paper_rig):
     import dataclasses
 
-    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.recon.model import calibration_from_frame_truth
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.io import rig_truth
     from lts360.twin.rig import twin_design
@@ -505,7 +505,7 @@ def test_the_twin_of_a_perturbed_calibration_corrects_as_the_true_one(small_gaug
     mirror views 0.1 mm apart make the measured profile a patchwork the twin renders); lit
     through the calibrated mirrors as they are instead, the tilt alone moves the mirror
     views' corrections by +69 and −60 µm.  The issue's 1 µm is NOT reached at this size."""
-    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.model import load_calibration
 
     cal = load_calibration(small_gauge_frame / "frame.json")
     true = _view_corrections(cal, small_gauge_frame)

@@ -235,7 +235,7 @@ def _scan_calibration_hint(path) -> None:
 
 
 def cmd_measure(args) -> int:
-    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.model import load_calibration
     from lts360.recon.triangulation.acceptance import refusal, section_coverage
     from lts360.recon.triangulation.cloud import write_cloud
     from lts360.recon.triangulation.grid import CylGrid
@@ -443,10 +443,11 @@ def cmd_compensate(args) -> int:
 
     from lts360.geometry.fit import fit_circle
     from lts360.recon.calibration.compensation import joint_view_offsets, master_fit
-    from lts360.recon.calibration.model import load_calibration, save_calibration
+    from lts360.recon.model import load_calibration, save_calibration
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.inverse import inverse_triangulate
-    from lts360.recon.triangulation.measure import collect_sections, read_image
+    from lts360.recon.images import read_image
+    from lts360.recon.triangulation.measure import collect_sections
 
     if not args.radius_mm > 0 or not args.band_mm > 0 or args.band_mm >= args.radius_mm:
         raise UsageError(f"--radius-mm/--band-mm: need 0 < band < radius, got "
@@ -668,7 +669,7 @@ def cmd_inspect(args) -> int:
     nominal = None if args.nominal is None else load_nominal(args.nominal)
     cal = None
     if args.calibration is not None:
-        from lts360.recon.calibration.model import load_calibration
+        from lts360.recon.model import load_calibration
 
         cal = load_calibration(args.calibration)
     truth = None

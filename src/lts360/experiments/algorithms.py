@@ -56,7 +56,7 @@ def _render(out: Path, name: str, *, rig: str, spp: int, seed: int) -> Path:
 @functools.lru_cache(maxsize=8)
 def _setup(frame_dir: str, theta_step_deg: float, r_step_mm: float):
     """Radiance, truth object, calibration, grid and the per-method plans — once per process."""
-    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.recon.model import calibration_from_frame_truth
     from lts360.recon.triangulation.classic import view_regions
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.inverse import plan_inverse

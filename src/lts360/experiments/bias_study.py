@@ -46,7 +46,7 @@ def bias_trial(trial: Trial) -> TrialOutput:
     """Render one gauge, measure it plain and twin-corrected, score both."""
     import mitsuba as mi
 
-    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.recon.model import calibration_from_frame_truth
     from lts360.recon.triangulation.measure import Section, measure_sections_following
     from lts360.scenes.objects import build_object
     from lts360.scenes.rig_io import load_rig

@@ -32,7 +32,7 @@ __all__ = ["run_demo"]
 def _measure_frames(root: Path, obj, echo) -> dict:
     """Inverse triangulation of the demo frames with the true calibration, then scoring."""
     from lts360.experiments.score import score_cloud
-    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.model import load_calibration
     from lts360.recon.triangulation.cloud import write_cloud
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.measure import collect_sections, measure_sections

@@ -148,7 +148,7 @@ def file_uncertainty(path):
     ValueError
         The file is not a calibration, or it has no uncertainty block.
     """
-    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.model import load_calibration
 
     try:
         cal = load_calibration(path)
@@ -237,7 +237,7 @@ def _simulate_shares(rig, *, draws: int, spp: int, seed: int, placement_mm: floa
         THETA_STEP_DEG,
     )
     from lts360.experiments.design_space.trial import _measure_draw
-    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.recon.model import calibration_from_frame_truth
     from lts360.recon.calibration.uncertainty import sample_calibration
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.scenes.objects import build_object
@@ -347,7 +347,7 @@ def check_calibrations(rig, files, *, spp: int = 16, seed: int = 0,
         THETA_STEP_DEG,
     )
     from lts360.experiments.design_space.trial import _measure_draw
-    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.model import load_calibration
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.scenes.objects import build_object
     from lts360.simulator.frame import sensor_image, simulate_frame

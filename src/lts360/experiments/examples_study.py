@@ -44,7 +44,7 @@ def examples_trial(trial: Trial) -> TrialOutput:
     import mitsuba as mi
 
     from lts360.experiments.score import score_cloud
-    from lts360.recon.calibration.model import calibration_from_frame_truth, load_calibration
+    from lts360.recon.model import calibration_from_frame_truth, load_calibration
     from lts360.recon.triangulation.cloud import write_cloud
     from lts360.recon.triangulation.measure import Section, measure_sections_following
     from lts360.scenes.objects import build_object

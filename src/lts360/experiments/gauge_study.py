@@ -115,7 +115,7 @@ def _plan(cal_path, r_mm: float, band_mm: float, theta_step_deg: float, r_step_m
 @functools.lru_cache(maxsize=4)
 def _cached_plan(cal_path: str, version: tuple, r_mm: float, band_mm: float,
                  theta_step_deg: float, r_step_mm: float):
-    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.model import load_calibration
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.inverse import plan_inverse
 
@@ -135,7 +135,7 @@ def _window_pixels(cal_path: str, version: tuple, r_mm: float, band_mm: float,
                    theta_step_deg: float, r_step_mm: float) -> np.ndarray:
     """The pixels :func:`measure_gauge_image` reads with this calibration (the trials render
     only these: the band's projection in every view, a fifth of the image)."""
-    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.model import load_calibration
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.inverse import plan_inverse, plan_pixels
 
@@ -310,7 +310,7 @@ def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str,
 
     import mitsuba as mi
 
-    from lts360.recon.calibration.model import load_calibration, save_calibration
+    from lts360.recon.model import load_calibration, save_calibration
     from lts360.recon.calibration.compensation import joint_view_offsets
     from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.recon.triangulation.grid import CylGrid

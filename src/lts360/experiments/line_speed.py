@@ -68,7 +68,7 @@ def line_speed_trial(trial: Trial) -> TrialOutput:
     import mitsuba as mi
 
     from lts360.experiments.score import true_radius_band
-    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.recon.model import calibration_from_frame_truth
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.recon.triangulation.measure import RowTiming, result_to_cloud

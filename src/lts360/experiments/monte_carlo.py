@@ -158,7 +158,7 @@ def _placement(frame_dir: str):
 
 @functools.lru_cache(maxsize=2)
 def _calibration(path: str):
-    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.model import load_calibration
 
     return load_calibration(path)
 

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lts360.recon.calibration.model import Calibration
+from lts360.recon.model import Calibration
 from lts360.scenes.materials import get_material
 from lts360.scenes.rig import Rig
 from lts360.twin.profile import axial_form, loft_mesh, ray_radii, section_profile

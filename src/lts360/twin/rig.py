@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lts360.recon.calibration.model import Calibration
+from lts360.recon.model import Calibration
 from lts360.scenes.rig import Camera, Mirror, Rig
 
 __all__ = ["CalibratedCamera", "twin_rig", "twin_design", "recorded_rig", "laser_side_mirrors", "MAX_FRAME_MISMATCH_MM",

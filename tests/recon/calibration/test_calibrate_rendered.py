@@ -58,7 +58,7 @@ def test_the_small_target_shots_are_rendered_with_their_own_spp(calibrated):
 
 
 def test_outputs_are_written_and_loadable(calibrated):
-    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.model import load_calibration
 
     out, report = calibrated
     cal = load_calibration(out / "calibration.json")
@@ -102,7 +102,7 @@ def test_estimates_are_near_the_truth(calibrated):
 def test_the_images_folder_alone_reproduces_the_calibration(calibrated, tmp_path):
     """`--images DIR`: nothing rendered, the same result from the same files."""
     from lts360.experiments.calibration_run import run_calibrate
-    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.model import load_calibration
 
     out, _ = calibrated
     report = run_calibrate(tmp_path, images_dir=out / "images", say=lambda *_: None)
@@ -121,7 +121,7 @@ def test_a_camera_model_round_on_the_same_images(calibrated, tmp_path):
     image model of their own squares fit Zhang's model far more tightly than SB's, and the
     calibration stays as near the truth as the tolerances above ask."""
     from lts360.experiments.calibration_run import run_calibrate
-    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.model import load_calibration
 
     out, sb_report = calibrated
     report = run_calibrate(tmp_path, images_dir=out / "images", camera_model_rounds=1,

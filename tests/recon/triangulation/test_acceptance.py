@@ -79,7 +79,7 @@ def _write_png(path, img):
 
 def _stripe_in(view: str, cal_path, shape, radius_mm=10.0) -> np.ndarray:
     """An 8-bit image with the laser line of a Ø2r section in one view only (σ ≈ 1.2 px)."""
-    from lts360.recon.calibration.model import load_calibration
+    from lts360.recon.model import load_calibration
     from lts360.recon.triangulation.inverse import plan_inverse
 
     grid = CylGrid.from_ranges((radius_mm - 0.01, radius_mm + 0.01), theta_step_deg=0.02,

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from test_inverse import synthesize_section
 
-from lts360.recon.calibration.model import calibration_from_dict
+from lts360.recon.model import calibration_from_dict
 from lts360.recon.triangulation.band import (BandSearch, follow_profile, measurable_radii,
                                              profile_windows)
 from lts360.recon.triangulation.grid import CylGrid

@@ -16,7 +16,7 @@ def case():
     if not dr.has_backend(dr.JitBackend.LLVM):
         pytest.skip("Dr.Jit's LLVM backend is not available")
     mi.set_variant("llvm_ad_mono")
-    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.recon.model import calibration_from_frame_truth
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.inverse import plan_inverse
     from lts360.scenes.objects import build_object

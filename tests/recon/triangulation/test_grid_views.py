@@ -3,7 +3,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from lts360.recon.calibration.model import calibration_from_dict
+from lts360.recon.model import calibration_from_dict
 from lts360.recon.triangulation.grid import CylGrid
 from lts360.recon.triangulation.views import get_views, make_views, view_windows
 from lts360.scenes.coverage import coverage

@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from lts360.geometry import fit_circle, project_points
-from lts360.recon.calibration.model import calibration_from_dict
+from lts360.recon.model import calibration_from_dict
 from lts360.recon.triangulation.grid import CylGrid
 from lts360.recon.triangulation.inverse import (_shift_on_rays, estimate_view_offsets, inverse_triangulate,
                                   plan_inverse)
@@ -239,7 +239,7 @@ def test_bad_inputs(cal, grid):
 
 
 def test_recon_imports_no_ground_truth():
-    code = ("import sys, lts360.recon.triangulation.inverse, lts360.recon.calibration.model, lts360.recon.triangulation.views, "
+    code = ("import sys, lts360.recon.triangulation.inverse, lts360.recon.model, lts360.recon.triangulation.views, "
             "lts360.recon.triangulation.peaks, lts360.recon.triangulation.interp, lts360.recon.triangulation.grid; "
             "print(sorted(m for m in sys.modules if m.startswith(('lts360.simulator', "
             "'lts360.scenes', 'mitsuba'))))")

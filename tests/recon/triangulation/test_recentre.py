@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lts360.recon.calibration.model import calibration_from_frame_truth, shift_origin
+from lts360.recon.model import calibration_from_frame_truth, shift_origin
 from lts360.recon.triangulation.band import Profile
 from lts360.recon.triangulation.measure import RECENTRE_MAX_INCIDENCE_DEG, recentre_point
 from lts360.recon.triangulation.views import get_views, project_meas_points

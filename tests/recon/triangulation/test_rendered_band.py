@@ -17,7 +17,7 @@ import pytest
 mi = pytest.importorskip("mitsuba", reason="rendering needs Mitsuba 3")
 
 from lts360.experiments.score import score_cloud  # noqa: E402
-from lts360.recon.calibration.model import calibration_from_frame_truth  # noqa: E402
+from lts360.recon.model import calibration_from_frame_truth  # noqa: E402
 from lts360.recon.triangulation.band import BandSearch, profile_windows  # noqa: E402
 from lts360.recon.triangulation.grid import CylGrid  # noqa: E402
 from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse  # noqa: E402

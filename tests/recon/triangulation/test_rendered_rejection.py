@@ -37,7 +37,7 @@ def test_rejection_fractions_on_a_noise_free_section(name, tmp_path):
         pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
     mi.set_variant("llvm_ad_mono")
     from lts360.experiments.score import score_cloud
-    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.recon.model import calibration_from_frame_truth
     from lts360.recon.triangulation.measure import Section, measure_sections_following
     from lts360.scenes.objects import build_object
     from lts360.scenes.rig_io import load_rig

@@ -189,7 +189,7 @@ def _measure_draw(result, r_true_mm: float, centre_mm: np.ndarray) -> dict:
 
 
 def _monte_carlo(rig: Rig, *, draws: int, spp: int, scale: float, seed: int) -> dict:
-    from lts360.recon.calibration.model import calibration_from_frame_truth
+    from lts360.recon.model import calibration_from_frame_truth
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.scenes.objects import build_object
     from lts360.simulator.frame import sensor_image, simulate_frame

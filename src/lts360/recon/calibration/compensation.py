@@ -25,7 +25,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from lts360.geometry.fit import fit_circle
-from lts360.recon.triangulation.inverse import raw_view_points
+from lts360.recon.view_points import raw_view_points
 
 __all__ = ["joint_view_offsets", "master_fit", "MasterFit", "MIN_MASTER_SPREAD_MM"]
 

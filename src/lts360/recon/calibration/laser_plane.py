@@ -27,7 +27,7 @@ from lts360.geometry.camera import backproject_pixels, project_camera_points
 from lts360.geometry.fit import fit_plane
 from lts360.recon.calibration.board import BoardGeometry
 from lts360.recon.calibration.camera import detect_corners
-from lts360.recon.triangulation.classic import steger_centres
+from lts360.recon.lines import steger_centres
 
 __all__ = ["LaserLine", "LaserPlaneEstimate", "board_pose", "board_pose_in_mirror",
            "laser_line_points", "fit_laser_plane"]

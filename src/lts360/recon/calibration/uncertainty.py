@@ -108,7 +108,7 @@ def sample_calibration(cal, rng: np.random.Generator):
     The measurement frame is rebuilt from the drawn laser plane so that it stays valid: its
     origin is projected onto the new plane and its z axis turned onto the new normal.
     """
-    from lts360.recon.calibration.model import MirrorPlane, make_T_cam_meas
+    from lts360.recon.model import MirrorPlane, make_T_cam_meas
 
     u = cal.uncertainty or {}
     K, dist = cal.K.copy(), cal.dist.copy()

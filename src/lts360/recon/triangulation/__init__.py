@@ -6,6 +6,6 @@ a radial profile), ``inverse`` (the numpy reference), ``fast`` (the Dr.Jit kerne
 (the image-space baseline: Steger centres, rays ∩ laser plane), ``measure`` (frames and scans to
 clouds) and ``cloud`` (the measured point cloud as PLY).
 
-Reads a :class:`lts360.recon.calibration.Calibration`; never imports the calibration
-procedures, :mod:`lts360.simulator` or :mod:`lts360.scenes`.
+Reads a :class:`lts360.recon.model.Calibration`; never imports the calibration part
+(:mod:`lts360.recon.calibration`), :mod:`lts360.simulator` or :mod:`lts360.scenes`.
 """

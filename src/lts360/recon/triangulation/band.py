@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lts360.geometry.mirror import transform_plane
-from lts360.recon.calibration.model import Calibration
+from lts360.recon.model import Calibration
 from lts360.recon.triangulation.grid import CylGrid
 from lts360.recon.triangulation.inverse import InversePlan, InverseResult, plan_inverse
 from lts360.recon.triangulation.peaks import Quality

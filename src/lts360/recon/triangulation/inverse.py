@@ -31,43 +31,23 @@ from typing import Mapping
 import numpy as np
 
 from lts360.geometry.fit import fit_circle
-from lts360.recon.calibration.model import Calibration
+from lts360.recon.images import default_saturation, default_threshold
+from lts360.recon.model import Calibration
 from lts360.recon.triangulation.grid import CylGrid
 from lts360.recon.triangulation.interp import INTERPOLATIONS, CubicSampler, sample_cubic
 from lts360.recon.triangulation.peaks import PeakResult, Quality, detect_peaks
+from lts360.recon.view_points import raw_view_points
 from lts360.recon.triangulation.views import (DEFAULT_MAX_INCIDENCE_DEG, DIRECT, View, get_views,
                                               project_meas_points, seen_through_mirrors,
                                               view_windows)
 
-__all__ = ["ViewPlan", "InversePlan", "ViewResult", "FusedCloud", "InverseResult", "raw_view_points",
+__all__ = ["ViewPlan", "InversePlan", "ViewResult", "FusedCloud", "InverseResult",
            "plan_inverse", "plan_pixels", "project_grid", "sample_profiles", "assemble_view", "compensation_of",
-           "inverse_triangulate", "estimate_view_offsets", "default_threshold",
-           "default_saturation", "DEFAULT_ACCEPT", "DEFAULT_THRESHOLD_FRACTION"]
+           "inverse_triangulate", "estimate_view_offsets", "DEFAULT_ACCEPT",]
 
 #: Qualities whose radius is kept: a saturated line still has a usable centre; a profile with
 #: a second comparable peak is ambiguous and dropped.
 DEFAULT_ACCEPT = (Quality.FOUND, Quality.SATURATED)
-#: Default threshold as a fraction of full scale (integer images) or of the image maximum.
-DEFAULT_THRESHOLD_FRACTION = 0.1
-
-
-def default_threshold(image: np.ndarray) -> float:
-    """10 % of full scale for integer images (25.5 DN at 8 bit), 10 % of the maximum otherwise.
-
-    At 8 bit that lies well above the dark level and read noise of the paper's camera
-    (a few DN) and well below a properly exposed line (the paper sets the exposure for it).
-    """
-    img = np.asarray(image)
-    if img.dtype.kind in "ui":
-        return DEFAULT_THRESHOLD_FRACTION * float(np.iinfo(img.dtype).max)
-    peak = float(np.nanmax(img)) if img.size else 0.0
-    return DEFAULT_THRESHOLD_FRACTION * peak if peak > 0 else 0.0
-
-
-def default_saturation(image: np.ndarray) -> float | None:
-    """Full scale for integer images (255 at 8 bit); ``None`` (never saturated) for float images."""
-    img = np.asarray(image)
-    return float(np.iinfo(img.dtype).max) if img.dtype.kind in "ui" else None
 
 
 # -- stage 1: plan -----------------------------------------------------------------------------
@@ -595,29 +575,6 @@ def inverse_triangulate(image, cal: Calibration, grid: CylGrid, *, views=None, w
                          compensated=bool(compensate), accept=tuple(Quality(q) for q in accept))
 
 
-def raw_view_points(result: InverseResult, *, reference: str = DIRECT,
-                    min_points: int = 10) -> dict[str, np.ndarray]:
-    """Each view's uncompensated (x, y) points (measurement frame, accepted qualities) of a
-    round section, for the residual compensation of paper §4.4.
-
-    Raises
-    ------
-    ValueError
-        No ``reference`` view, or a view with fewer than ``min_points`` valid points.
-    """
-    if reference not in result.views:
-        raise ValueError(f"reference: no view {reference!r} in the result ({list(result.views)})")
-    accept = [int(q) for q in result.accept]
-    out = {}
-    for name, v in result.views.items():
-        ok = np.isfinite(v.r_raw_mm) & np.isin(v.quality, accept)
-        if ok.sum() < min_points:
-            raise ValueError(f"view {name!r}: {int(ok.sum())} valid points, a circle fit needs "
-                             f"at least {min_points}")
-        out[name] = v.raw_points_meas_mm[ok, :2]
-    return out
-
-
 def estimate_view_offsets(result: InverseResult, *, reference: str = DIRECT,
                           min_points: int = 10) -> dict[str, np.ndarray]:
     """Residual compensation of paper §4.4 from the measurement of a round section.
@@ -627,7 +584,7 @@ def estimate_view_offsets(result: InverseResult, *, reference: str = DIRECT,
     is the translation of its centre onto the reference view's centre.  The returned values
     are absolute: store them as ``Calibration.view_offsets_mm``
     (``dataclasses.replace(cal, view_offsets_mm=offsets)``) whatever the result's own
-    compensation was.  :func:`lts360.recon.calibration.compensation.joint_view_offsets` fits one circle
+    compensation was.  the calibration part's ``joint_view_offsets`` fits one circle
     to all views instead (better conditioned for ~150° arcs).
 
     Raises

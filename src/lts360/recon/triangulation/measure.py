@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lts360.recon.calibration.model import Calibration
+from lts360.recon.images import read_image
+from lts360.recon.model import Calibration
 from lts360.recon.triangulation.cloud import VIEW_CODES, Cloud
 from lts360.recon.triangulation.grid import DEFAULT_R_STEP_MM, DEFAULT_THETA_STEP_DEG, CylGrid
 from lts360.recon.triangulation.inverse import (InversePlan, InverseResult, inverse_triangulate,
@@ -23,7 +24,7 @@ from lts360.recon.triangulation.inverse import (InversePlan, InverseResult, inve
 from lts360.recon.triangulation.peaks import Quality
 
 __all__ = ["RowTiming", "Section", "collect_sections", "measure_sections", "measure_sections_following",
-           "make_runner", "result_to_cloud", "read_image", "BandLog"]
+           "make_runner", "result_to_cloud", "BandLog"]
 
 
 @dataclass(frozen=True)
@@ -70,18 +71,6 @@ class Section:
 
     def read(self) -> np.ndarray:
         return read_image(self.image_path) if self.image is None else self.image
-
-
-def read_image(path: Path) -> np.ndarray:
-    """A greyscale image from a file (8 or 16 bit as stored; colour converted to grey)."""
-    import cv2
-
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise ValueError(f"{path}: not a readable image")
-    if img.ndim == 3:
-        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
-    return img
 
 
 def collect_sections(inputs, *, pitch_mm: float | None = None) -> list[Section]:
@@ -476,7 +465,7 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
     """
     import time
 
-    from lts360.recon.calibration.model import shift_origin
+    from lts360.recon.model import shift_origin
     from lts360.recon.triangulation.band import (DEFAULT_FOLLOW_HALF_WIDTH_MM, BandSearch,
                                                  Profile, hidden_rows, profile_windows)
 

@@ -35,12 +35,12 @@ import numpy as np
 from lts360.geometry.camera import project_camera_points
 from lts360.geometry.mirror import mirror_matrix, transform_plane
 from lts360.geometry.mirror_path import PathMirror, path_valid, quad_extent
-from lts360.recon.calibration.model import Calibration
+from lts360.recon.model import Calibration
+from lts360.recon.view_points import DIRECT
 
 __all__ = ["View", "make_views", "get_views", "view_transform", "project_meas_points",
            "view_windows", "seen_through_mirrors", "DEFAULT_MAX_INCIDENCE_DEG", "DIRECT"]
 
-DIRECT = "direct"
 DEFAULT_MAX_INCIDENCE_DEG = 80.0
 #: Radii tested across the grid's range when deriving windows (both ends and the middle).
 DEFAULT_WINDOW_RADII = 3
