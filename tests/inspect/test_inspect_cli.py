@@ -117,7 +117,7 @@ def test_measure_names_the_frame_json_of_a_scan_folder(tmp_path, capsys):
     """A scan folder has no frame.json of its own: `measure` says which file to use."""
     scan = tmp_path / "scan"
     (scan / "section_0000").mkdir(parents=True)
-    (scan / "scan.json").write_text("{}")
+    (scan / "scan.json").write_text('{"sections": [{"dir": "section_0000", "z_mm": 0.0}]}')
     (scan / "section_0000" / "frame.json").write_text("{}")
     assert main(["measure", str(scan), "--calibration", str(scan / "frame.json"), "--out",
                  str(tmp_path / "c.ply")]) == 2

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from lts360.folders import (FRAME_FILE, frame_file, is_frame, is_scan, section_dir_name,
+                             section_dirs, write_scan_meta)
 from lts360.cli.usage import UsageError, _progress, _set_variant
 
 
@@ -68,7 +70,6 @@ def cmd_rig(args) -> int:
 
 
 def cmd_render(args) -> int:
-    import json
 
     from lts360.scenes.objects import build_object
     from lts360.scenes.objects.part import check_in_field
@@ -126,10 +127,9 @@ def cmd_render(args) -> int:
     for k, z in enumerate(_progress(zs, "sections")):
         frame = simulate_frame(rig, obj, z_mm=float(z), seed=args.seed + k, scenes=scenes,
                                **{key: v for key, v in kw.items() if key != "seed"})
-        write_frame(tmp / f"section_{k:04d}", frame)
-        sections.append({"dir": f"section_{k:04d}", "z_mm": float(z), "seed": args.seed + k})
-    (tmp / "scan.json").write_text(json.dumps({"object": obj.spec, "pitch_mm": args.pitch_mm,
-                                               "sections": sections}, indent=2))
+        write_frame(tmp / section_dir_name(k), frame)
+        sections.append({"dir": section_dir_name(k), "z_mm": float(z), "seed": args.seed + k})
+    write_scan_meta(tmp, {"object": obj.spec, "pitch_mm": args.pitch_mm, "sections": sections})
     shutil.rmtree(out, ignore_errors=True)
     tmp.replace(out)
     print(f"{obj.name}: {args.sections} sections, pitch {args.pitch_mm:g} mm -> {out}/")
@@ -172,7 +172,6 @@ def _acquisition(args):
 
 def _render_moving(args, rig, obj, acq, out: Path, variant: str) -> int:
     """``render`` of a moving object: one frame, or a scan triggered by ``acq.trigger``."""
-    import json
     import shutil
 
     from lts360.simulator.frame import write_frame
@@ -207,12 +206,12 @@ def _render_moving(args, rig, obj, acq, out: Path, variant: str) -> int:
         for k, t in enumerate(_progress(times, "sections")):
             frame = frames[0] if k == 0 else simulate_moving_frame(
                 rig, obj, acq, t_trigger_s=float(t), seed=args.seed + k, **kw)
-            write_frame(tmp / f"section_{k:04d}", frame)
-            sections.append({"dir": f"section_{k:04d}", "t_trigger_s": float(t),
+            write_frame(tmp / section_dir_name(k), frame)
+            sections.append({"dir": section_dir_name(k), "t_trigger_s": float(t),
                              "z_mm": float(args.z_mm - acq.motion.speed_mm_s * t),
                              "seed": args.seed + k})
-        (tmp / "scan.json").write_text(json.dumps({"object": obj.spec, "acquisition":
-                                                   acq.to_dict(), "sections": sections}, indent=2))
+        write_scan_meta(tmp, {"object": obj.spec, "acquisition": acq.to_dict(),
+                              "sections": sections})
     shutil.rmtree(out, ignore_errors=True)
     tmp.replace(out)
     m = frames[0].truth["motion"]
@@ -226,12 +225,12 @@ def _scan_calibration_hint(path) -> None:
     """A calibration path that does not exist inside a scan folder (``SCAN/frame.json``): name
     the file to use, since each section of a rendered scan holds its own ``frame.json``."""
     p = Path(path)
-    if p.exists() or not (p.parent / "scan.json").is_file():
+    if p.exists() or not is_scan(p.parent):
         return
-    first = sorted(p.parent.glob("section_*/frame.json"))
+    first = [frame_file(d) for d in section_dirs(p.parent) if is_frame(d)]
     if first:
-        raise UsageError(f"--calibration: {p} does not exist; a scan folder holds one frame.json "
-                         f"per section (the same rig): use {first[0]}")
+        raise UsageError(f"--calibration: {p} does not exist; a scan folder holds one "
+                         f"{FRAME_FILE} per section (the same rig): use {first[0]}")
 
 
 def cmd_measure(args) -> int:

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lts360.folders import is_frame, read_frame_meta
 from lts360.experiments.runner import Trial, TrialOutput, grid_params, plan_trials, run_study
 
 __all__ = ["METHODS", "DEFAULT_OBJECTS", "algorithms_trial", "run_algorithms_study",
@@ -43,7 +44,7 @@ def _render(out: Path, name: str, *, rig: str, spp: int, seed: int) -> Path:
     from lts360.simulator.frame import simulate_frame, write_frame
 
     d = out / "renders" / name
-    if not (d / "frame.json").is_file():
+    if not is_frame(d):
         if mi.variant() is None:
             mi.set_variant("llvm_ad_mono")
         obj = build_object(name)
@@ -64,7 +65,7 @@ def _setup(frame_dir: str, theta_step_deg: float, r_step_mm: float):
     from lts360.simulator.io import read_exr
 
     d = Path(frame_dir)
-    meta = json.loads((d / "frame.json").read_text())
+    meta = read_frame_meta(d)
     ch = read_exr(d / "radiance.exr")
     obj = build_object(meta["object"]["spec"])
     z = float(meta["stage"]["z_mm"])

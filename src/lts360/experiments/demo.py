@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lts360.folders import frame_file, read_frame_meta
 from lts360.experiments.figures import plot_rig, plot_sections
 from lts360.experiments.report import format_coverage, format_rig
 from lts360.scenes.coverage import coverage
@@ -47,12 +48,12 @@ def _measure_frames(root: Path, obj, echo) -> dict:
          f"{'direct':>8s} {'left':>8s} {'right':>8s}")
     for name in ("plug-gauge-none", "plug-gauge-realistic"):
         d = root / "frames" / name
-        cal = load_calibration(d / "frame.json")
+        cal = load_calibration(frame_file(d))
         t0 = time.perf_counter()
         cloud = measure_sections(collect_sections([d]), cal, grid)
         dt = time.perf_counter() - t0
         write_cloud(d / "cloud.ply", cloud)
-        m = score_cloud(cloud, obj, rig_truth=json.loads((d / "frame.json").read_text()))
+        m = score_cloud(cloud, obj, rig_truth=read_frame_meta(d))
         m["measure_seconds"] = dt
         write_json(d / "metrics.json", m)
         _inspect_gauge(d, cloud, obj, cal)

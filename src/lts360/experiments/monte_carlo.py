@@ -67,6 +67,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lts360.folders import is_frame, read_frame_meta
 from lts360.experiments.gauge_study import (DEFAULT_PLACEMENT_MM, DELTA_T_K, GAUGE_DIAMETER_MM,
                                             STEEL_ALPHA_PER_K, gauge_placements)
 from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study
@@ -152,7 +153,7 @@ def _placement(frame_dir: str):
     from lts360.simulator.io import read_exr
 
     ch = read_exr(Path(frame_dir) / "radiance.exr")
-    meta = json.loads((Path(frame_dir) / "frame.json").read_text())
+    meta = read_frame_meta(frame_dir)
     return ch["Y"], ch["laser"], meta
 
 
@@ -217,7 +218,7 @@ def _offset_mm(frame_dir: str) -> float:
     """Distance of a rendered placement's axis from the rig's axis (from its frame.json)."""
     from lts360.scenes.objects import build_object
 
-    meta = json.loads((Path(frame_dir) / "frame.json").read_text())
+    meta = read_frame_meta(frame_dir)
     pl = build_object(meta["object"]["spec"]).placement
     return float(math.hypot(pl.x_mm, pl.y_mm))
 
@@ -322,7 +323,7 @@ def _render_placements(out: Path, n: int, *, rig: str, seed: int, spp: int, say,
         mi.set_variant("llvm_ad_mono")
     for k, params in enumerate(gauge_placements(n, seed, offset_mm=placement_mm)):
         d = root / f"placement_{k:02d}"
-        if (d / "frame.json").is_file():
+        if is_frame(d):
             continue
         say(f"rendering placement {k + 1}/{n}: {params['spec']}")
         frame = simulate_frame(load_rig(rig), build_object(params["spec"]), spp=spp,

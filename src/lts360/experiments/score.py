@@ -13,16 +13,15 @@ Errors are signed: positive outside the true surface.  Two truths: the analytic 
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
 
 import numpy as np
 
+from lts360.folders import first_frame_meta
 from lts360.geometry.fit import fit_circle
 from lts360.recon.triangulation.cloud import VIEW_NAMES, Cloud
 from lts360.recon.triangulation.reject import rejection_counts
 from lts360.scenes.objects import SceneObject
-from lts360.scenes.objects.catalog import object_from_truth
+from lts360.scenes.frame_truth import load_truth
 
 __all__ = ["true_radius_band", "load_truth", "load_rig_truth", "signed_mesh_distance",
            "score_cloud", "error_stats", "measurable"]
@@ -116,31 +115,9 @@ def true_radius_band(obj: SceneObject, zs, margin_mm: float = 1.0) -> tuple[floa
     return max(0.5, float(r.min()) - margin_mm), float(r.max()) + margin_mm
 
 
-def load_truth(truth_dir) -> tuple[SceneObject, list[float]]:
-    """The object and the stage positions of a frame directory or a scan directory."""
-    d = Path(truth_dir)
-    if (d / "scan.json").is_file():
-        scan = json.loads((d / "scan.json").read_text())
-        dirs = [d / s["dir"] for s in scan["sections"]]
-    elif (d / "frame.json").is_file():
-        dirs = [d]
-    else:
-        raise ValueError(f"--truth: {str(d)!r} holds neither frame.json nor scan.json")
-    frames = [json.loads((f / "frame.json").read_text()) for f in dirs]
-    specs = {f["object"]["spec"] for f in frames}
-    if len(specs) != 1:
-        raise ValueError(f"--truth: the frames hold different objects: {sorted(specs)}")
-    return (object_from_truth(frames[0]["object"], dirs[0]),
-            [float(f["stage"]["z_mm"]) for f in frames])
-
-
 def load_rig_truth(truth_dir) -> dict:
     """The ``frame.json`` of a frame directory, or of the first section of a scan directory."""
-    d = Path(truth_dir)
-    if (d / "scan.json").is_file():
-        first = json.loads((d / "scan.json").read_text())["sections"][0]["dir"]
-        return json.loads((d / first / "frame.json").read_text())
-    return json.loads((d / "frame.json").read_text())
+    return first_frame_meta(truth_dir)
 
 
 def signed_mesh_distance(mesh, points_mm: np.ndarray) -> np.ndarray:

@@ -10,35 +10,15 @@ section, so the true ovality, roundness and lobes are computed by the same defin
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
 
 import numpy as np
+
+from lts360.scenes.frame_truth import load_truth
 
 __all__ = ["load_truth", "true_section_xy"]
 
 #: θ step of a true section (deg): as fine as the measurement grid.
 TRUE_STEP_DEG = 0.1
-
-
-def load_truth(truth_dir):
-    """``(object, [z_mm …])`` of a frame or scan directory."""
-    from lts360.scenes.objects.catalog import object_from_truth
-
-    d = Path(truth_dir)
-    if (d / "scan.json").is_file():
-        scan = json.loads((d / "scan.json").read_text())
-        dirs = [d / s["dir"] for s in scan["sections"]]
-    elif (d / "frame.json").is_file():
-        dirs = [d]
-    else:
-        raise ValueError(f"--truth: {str(d)!r} holds neither frame.json nor scan.json")
-    frames = [json.loads((f / "frame.json").read_text()) for f in dirs]
-    specs = {f["object"]["spec"] for f in frames}
-    if len(specs) != 1:
-        raise ValueError(f"--truth: the frames hold different objects: {sorted(specs)}")
-    return (object_from_truth(frames[0]["object"], dirs[0]),
-            [float(f["stage"]["z_mm"]) for f in frames])
 
 
 def true_section_xy(obj, z_mm: float, *, step_deg: float = TRUE_STEP_DEG,

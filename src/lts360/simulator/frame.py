@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lts360.folders import frame_file, image_file
 from lts360.scenes.objects.base import SceneObject
 from lts360.scenes.objects.part import copy_part, part_truth
 from lts360.scenes.rig import Rig
@@ -299,12 +300,12 @@ def write_frame(out_dir, frame: Frame) -> Path:
     tmp = out.with_name(f".{out.name}.partial")
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir()
-    write_png(tmp / "image.png", frame.image)
+    write_png(image_file(tmp), frame.image)
     write_exr(tmp / "radiance.exr", {"Y": frame.render.radiance_W_m2_sr,
                                      "laser": frame.render.laser_W_m2_sr})
     frame.mesh_world.export(tmp / "truth.ply")
     copy_part(frame.truth["object"], tmp)
-    write_json(tmp / "frame.json", frame.truth)
+    write_json(frame_file(tmp), frame.truth)
     shutil.rmtree(out, ignore_errors=True)
     tmp.replace(out)
     return out

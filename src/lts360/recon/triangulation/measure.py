@@ -8,13 +8,13 @@ Nothing here reads the object or its truth.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from lts360.folders import image_file, is_frame, is_scan, read_frame_meta, read_scan
 from lts360.recon.images import read_image
 from lts360.recon.model import Calibration
 from lts360.recon.triangulation.cloud import VIEW_CODES, Cloud
@@ -82,23 +82,23 @@ def collect_sections(inputs, *, pitch_mm: float | None = None) -> list[Section]:
     out: list[Section] = []
     for item in inputs:
         p = Path(item)
-        if p.is_dir() and (p / "scan.json").is_file():
-            scan = json.loads((p / "scan.json").read_text())
+        if p.is_dir() and is_scan(p):
+            scan = read_scan(p)
             for s in scan["sections"]:
                 timing = None
                 if "t_trigger_s" in s and "acquisition" in scan:
                     timing = RowTiming.from_motion({"acquisition": scan["acquisition"],
                                                     "t_trigger_s": s["t_trigger_s"]})
-                out.append(Section(p / s["dir"] / "image.png", float(s["z_mm"]), timing))
-        elif p.is_dir() and (p / "image.png").is_file():
+                out.append(Section(image_file(p / s["dir"]), float(s["z_mm"]), timing))
+        elif p.is_dir() and image_file(p).is_file():
             z, timing = 0.0, None
-            if (p / "frame.json").is_file():
-                meta = json.loads((p / "frame.json").read_text())
+            if is_frame(p):
+                meta = read_frame_meta(p)
                 z = float(meta.get("stage", {}).get("z_mm", 0.0))
                 timing = RowTiming.from_motion(meta.get("motion"))
                 if timing is not None:  # the section's height at the trigger
                     z -= timing.speed_mm_s * timing.t_trigger_s
-            out.append(Section(p / "image.png", z, timing))
+            out.append(Section(image_file(p), z, timing))
         elif p.is_file():
             if pitch_mm is None:
                 raise ValueError(f"{p}: a bare image needs --pitch-mm to place it on the stage")
