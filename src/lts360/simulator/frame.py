@@ -56,7 +56,7 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
                    thin_lens: bool = True, exposure_time_s: float | None = None,
                    speckle_seed: int | None = None, background_z_mm: float | None = None,
                    exposure_fraction: float = 0.8, extra_meshes: tuple = (),
-                   pixels_xy: np.ndarray | None = None) -> Frame:
+                   pixels_xy: np.ndarray | None = None, max_scatter: int = 0) -> Frame:
     """Render one frame of ``obj`` in ``rig`` at stage height ``z_mm``.
 
     Parameters
@@ -81,6 +81,8 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
         offset and noise).  For a study that reads a band the calibration predicts: the
         pixels it reads have the statistics of a full render's (another noise realisation),
         at the cost of the pixels listed.  ``truth["render"]["pixels"]`` counts them.
+    max_scatter : int, [0, 3]
+        Interreflected laser light (the object onto itself, glints via a mirror); ``0``: none.
     """
     if noise not in NOISE_MODES:
         raise ValueError(f"noise must be one of {', '.join(NOISE_MODES)}, got {noise!r}")
@@ -90,7 +92,7 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
     meshes = (("object", mesh, material_to_bsdf(obj.material)),) + tuple(extra_meshes)
     spec = SceneSpec(rig, meshes, ambient=ambient, background_z_mm=background_z_mm)
     kw = dict(spp=spp, seed=seed, scale=scale, max_bounces=max_bounces, thin_lens=thin_lens,
-              laser_on=laser_on)
+              laser_on=laser_on, max_scatter=max_scatter)
     res = (render_radiance(spec, **kw) if pixels_xy is None
            else render_radiance_pixels(spec, pixels_xy, **kw))
     image, exposure_time_s, magnification = sensor_image(
@@ -105,8 +107,8 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
                    "measured_zone_z_mm": list(obj.measured_zone_z_mm)},
         "stage": {"z_mm": float(z_mm), "axis": [0.0, 0.0, 1.0]},
         "render": {"variant": res.variant, "spp": res.spp, "seed": res.seed, "scale": scale,
-                   "max_bounces": max_bounces, "thin_lens": thin_lens, "laser_on": laser_on,
-                   "ambient": ambient, "background_z_mm": background_z_mm,
+                   "max_bounces": max_bounces, "max_scatter": max_scatter,
+                   "thin_lens": thin_lens, "laser_on": laser_on, "ambient": ambient, "background_z_mm": background_z_mm,
                    "seconds": res.seconds,
                    "pixels": None if pixels_xy is None else int(len(pixels_xy))},
         "sensor": {"noise": noise, "exposure_time_s": float(exposure_time_s),
