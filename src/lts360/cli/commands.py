@@ -87,14 +87,22 @@ def cmd_render(args) -> int:
     acq = _acquisition(args)
     if acq is None and args.sections > 1 and not args.pitch_mm > 0:
         raise UsageError(f"--pitch-mm: must be > 0 for a scan, got {args.pitch_mm}")
+    if args.roughness is not None and not 0 < args.roughness <= 1:
+        raise UsageError(f"--roughness: must be in (0, 1], got {args.roughness}")
     rig = load_rig(args.rig)
     obj = build_object(args.object)
+    if args.roughness is not None:
+        import dataclasses
+
+        obj = dataclasses.replace(obj, material=dataclasses.replace(
+            obj.material, roughness_alpha=args.roughness))
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UsageError(f"--out: {str(out)!r} exists and is not a directory")
     variant = _set_variant(args.variant)
     kw = dict(spp=args.spp, seed=args.seed, noise=args.noise, laser_on=args.laser == "on",
               ambient=args.ambient, scale=args.scale, max_bounces=args.max_bounces,
+              max_scatter=args.max_scatter,
               thin_lens=not args.pinhole, background_z_mm=args.background_z_mm,
               exposure_time_s=None if args.exposure_us is None else args.exposure_us * 1e-6,
               exposure_fraction=args.exposure_fraction)
@@ -175,7 +183,8 @@ def _render_moving(args, rig, obj, acq, out: Path, variant: str) -> int:
     times = (np.zeros(1) if acq.trigger is None
              else acq.trigger.times_s(n, acq.motion.speed_mm_s, rng=args.seed))
     kw = dict(spp=args.spp, noise=args.noise, scale=args.scale, max_bounces=args.max_bounces,
-              thin_lens=not args.pinhole, step_px=args.step_px, z_mm=args.z_mm)
+              thin_lens=not args.pinhole, step_px=args.step_px, z_mm=args.z_mm,
+              max_scatter=args.max_scatter)
     try:  # everything checked on the first frame before anything is written
         frames = [simulate_moving_frame(rig, obj, acq, t_trigger_s=float(times[0]),
                                         seed=args.seed, **kw)]

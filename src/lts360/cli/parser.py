@@ -69,6 +69,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--scale", type=float, default=1.0, help="image scale in (0, 1]")
     s.add_argument("--max-bounces", type=int, choices=(0, 1, 2, 3), default=2,
                    help="mirror reflections followed on camera and laser paths (default 2)")
+    s.add_argument("--max-scatter", type=int, choices=(0, 1, 2, 3), default=0,
+                   help="interreflections of the laser light on the object (default 0: none)")
+    s.add_argument("--roughness", type=float, default=None, metavar="ALPHA",
+                   help="override the GGX roughness α of the object's material, in (0, 1]")
     s.add_argument("--pinhole", action="store_true", help="pinhole instead of the thin lens")
     s.add_argument("--exposure-us", type=float, default=None,
                    help="fixed exposure time (default: auto-exposure)")
