@@ -304,6 +304,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default: the frames' true one)")
     q.add_argument("--section-scale", type=float, default=1.0,
                    help="fraction of the paper's sections to scan (quick looks)")
+    q.add_argument("--max-scatter", type=int, choices=(0, 1, 2, 3), default=0,
+                   help="interreflections of the laser light (default 0: none)")
     q.set_defaults(func=cmd_study_examples)
 
     q = study_parser("line-speed", "a moving object: speed × exposure × shutter (global, "

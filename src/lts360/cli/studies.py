@@ -112,20 +112,23 @@ def cmd_study_monte_carlo(args) -> int:
 
 def cmd_study_examples(args) -> int:
     from lts360.experiments.examples_study import (
+        EXTRA_EXAMPLES,
         PAPER_EXAMPLES,
         format_examples,
         run_examples_study,
     )
 
     common = _study_common(args)
-    objects = _objects_arg(args.objects, list(PAPER_EXAMPLES), PAPER_EXAMPLES)
+    objects = _objects_arg(args.objects, list(PAPER_EXAMPLES) + list(EXTRA_EXAMPLES),
+                           PAPER_EXAMPLES)
     if not 0 < args.section_scale <= 1:
         raise UsageError(f"--section-scale: must be in (0, 1], got {args.section_scale}")
     _optional_file(args.calibration, "--calibration")
     _set_variant(args.variant)
     table = run_examples_study(args.out, objects=objects, noise=args.noise, spp=args.spp,
                                calibration=args.calibration, section_scale=args.section_scale,
-                               workers=args.workers or 1, **common)
+                               workers=args.workers or 1, max_scatter=args.max_scatter,
+                               **common)
     print(format_examples(table))
     print(f"wrote {args.out}/ (table.txt, clouds/*.ply, figures/*.png, trials/results.nc)")
     return 0
