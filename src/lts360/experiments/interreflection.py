@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -280,3 +281,101 @@ def compare_components(a: np.ndarray, b: np.ndarray) -> ComponentComparison:
                                chi2_per_dof=float(np.mean(z ** 2)) if z.size else math.nan,
                                n_pixels=int(lit.sum()),
                                frac_abs_z_over_4=float(np.mean(np.abs(z) > 4)) if z.size else math.nan)
+
+
+def validate_against_path(*, width: int = 48, height: int = 32, spp: int = 512,
+                          batches: dict | None = None) -> dict:
+    """The interreflection-only component of both renderers on both scenes (the slow test's
+    settings): per scene the :class:`ComponentComparison` of ``batches[scene]`` batches of
+    ``spp`` samples per pixel (seeds 100+k for ours, 200+k for Mitsuba's)."""
+    import dataclasses
+
+    batches = batches or {"corner": 12, "cylinder": 32}
+    out = {}
+    for name, n in batches.items():
+        vs = corner_scene() if name == "corner" else shiny_cylinder_scene()
+        a = np.concatenate([component_samples(vs, "laser", "scatter", width=width, height=height,
+                                              spp=spp, seed=100 + k) for k in range(n)], axis=-1)
+        b = np.concatenate([component_samples(vs, "path", "scatter", width=width, height=height,
+                                              spp=spp, seed=200 + k) for k in range(n)], axis=-1)
+        out[name] = dataclasses.asdict(compare_components(a, b)) | {
+            "width": width, "height": height, "spp": spp * n}
+    return out
+
+
+def secondary_stripe_figure(obj_name: str, path, *, spp: int = 64, scale: float = 0.5,
+                            max_scatter: int = 1, seed: int = 0) -> dict:
+    """A PNG of the object's stripe in the paper rig without and with interreflections and of
+    their difference (the secondary stripes), log-scaled radiance, cropped to the lit box;
+    returns the laser light's totals."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from lts360.scenes.objects import build_object
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.render import render_radiance
+    from lts360.simulator.scene import SceneSpec, object_meshes
+
+    spec = SceneSpec(load_rig("paper"), object_meshes(build_object(obj_name)))
+    imgs = [render_radiance(spec, spp=spp, seed=seed, scale=scale, max_scatter=m).laser_W_m2_sr
+            for m in (0, max_scatter)]
+    diff = np.clip(imgs[1].astype(np.float64) - imgs[0], 0.0, None)
+    lit = np.argwhere((imgs[0] > 0) | (diff > 0))
+    (y0, x0), (y1, x1) = lit.min(0), lit.max(0) + 1
+    peak = float(imgs[0].max())
+    fig, axes = plt.subplots(1, 3, figsize=(15, 5), sharex=True, sharey=True)
+    titles = ("max_scatter 0", f"max_scatter {max_scatter}", "difference: interreflected light")
+    for ax, img, title in zip(axes, (imgs[0], imgs[1], diff), titles):
+        im = ax.imshow(np.log10(np.maximum(img[y0:y1, x0:x1], peak * 1e-5) / peak),
+                       cmap="magma", vmin=-5, vmax=0, extent=(x0, x1, y1, y0))
+        ax.set_title(title)
+    fig.colorbar(im, ax=axes, label="log10 radiance / primary peak", shrink=0.8)
+    fig.suptitle(f"{obj_name}: laser light in the paper rig ({spp} spp, scale {scale})")
+    tmp = Path(path).with_name(f".{Path(path).stem}.tmp.png")
+    fig.savefig(tmp, dpi=90)
+    plt.close(fig)
+    tmp.replace(path)
+    return {"object": obj_name, "laser_sum": [float(imgs[0].sum()), float(imgs[1].sum())],
+            "gain": float(imgs[1].sum() / imgs[0].sum() - 1.0),
+            "secondary_peak_over_primary_peak": float(diff.max() / peak)}
+
+
+def main(argv=None) -> int:
+    """``python3 -m lts360.experiments.interreflection --out DIR [--figures OBJ,...]``:
+    the comparison with Mitsuba's ``path`` (``validation.json``) and the secondary-stripe
+    figures (``<object>.png``, ``figures.json``)."""
+    import argparse
+    import json
+
+    import mitsuba as mi
+
+    ap = argparse.ArgumentParser(prog="python3 -m lts360.experiments.interreflection")
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--figures", default="polished-shaft,alu-pipe,cut-tube")
+    ap.add_argument("--figure-spp", type=int, default=64)
+    ap.add_argument("--skip-validation", action="store_true")
+    args = ap.parse_args(argv)
+    mi.set_variant("llvm_ad_mono")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    if not args.skip_validation:
+        val = validate_against_path()
+        (out / "validation.json").write_text(json.dumps(val, indent=2))
+        for name, c in val.items():
+            print(f"{name}: ours {c['total_a']:.3f} ± {c['se_total_a']:.3f}, path "
+                  f"{c['total_b']:.3f} ± {c['se_total_b']:.3f} ({100 * c['rel_diff_total']:+.2f} %), "
+                  f"chi2/dof {c['chi2_per_dof']:.3f} over {c['n_pixels']} px, "
+                  f"|z| > 4: {100 * c['frac_abs_z_over_4']:.2f} %", flush=True)
+    figs = {}
+    for name in filter(None, args.figures.split(",")):
+        figs[name] = secondary_stripe_figure(name, out / f"{name}.png", spp=args.figure_spp)
+        print(f"{name}: laser light +{100 * figs[name]['gain']:.1f} %, secondary peak "
+              f"{figs[name]['secondary_peak_over_primary_peak']:.3g} of the primary", flush=True)
+    (out / "figures.json").write_text(json.dumps(figs, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
