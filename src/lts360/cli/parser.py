@@ -270,6 +270,8 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--placement-mm", type=float, default=0.3, metavar="R",
                    help="placements drawn uniformly in a disc of radius R mm about the axis "
                    "(default 0.3); results are also reported against the distance from it")
+    q.add_argument("--max-scatter", type=int, choices=(0, 1, 2, 3), default=0,
+                   help="interreflections of the laser light in the gauge's images (default 0)")
     q.set_defaults(func=cmd_study_plug_gauge)
 
     q = study_parser("monte-carlo", "GUM Supplement 1 Monte Carlo of the gauge radius, GUM "

@@ -69,7 +69,8 @@ def cmd_study_plug_gauge(args) -> int:
                                  noise=args.noise, spp=args.spp, rig=args.rig,
                                  compensation_shots=args.compensation_shots,
                                  placement_mm=args.placement_mm,
-                                 workers=args.workers or 1, **common)
+                                 workers=args.workers or 1, max_scatter=args.max_scatter,
+                                 **common)
     print(format_gauge_table(table))
     print(f"wrote {args.out}/ (table.txt, table.json, plug-gauge.png, trials/results.nc)")
     return 0
