@@ -24,7 +24,7 @@ from lts360.simulator.scene import SceneSpec, object_meshes
 
 spec = SceneSpec(load_rig("paper"), object_meshes(build_object("alu-pipe")), ambient="dim")
 res = render_radiance(spec, spp=4, seed=3, scale=0.125)
-commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, check=True,
                         text=True).stdout.strip()
 np.savez_compressed(Path(__file__).with_name("single_scatter_alu_pipe.npz"),
                     radiance=res.radiance_W_m2_sr, laser=res.laser_W_m2_sr, commit=commit,
