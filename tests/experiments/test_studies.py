@@ -205,6 +205,24 @@ def test_examples_and_algorithms_studies_end_to_end(tmp_path):
         assert abs(r["bias_um"]) < 15 and r["rms_um"] < 30, (method, r)
 
 
+def test_examples_study_with_interreflections_and_the_polished_shaft(tmp_path):
+    if "llvm_ad_mono" not in mi.variants():
+        pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
+    mi.set_variant("llvm_ad_mono")
+    import xarray as xr
+
+    from lts360.experiments.examples_study import run_examples_study
+
+    ex = run_examples_study(tmp_path / "ex", objects=["polished-shaft"], section_scale=0.04,
+                            noise="none", max_scatter=1)
+    row = ex["polished-shaft"]
+    assert row["sections"] == 1 and row["figure"] == 0 and row["coverage_deg"] > 200.0  # measured
+    ds = xr.open_dataset(tmp_path / "ex" / "trials" / "results.nc")
+    assert int(ds["max_scatter"].values[0]) == 1  # the trial rendered with interreflections
+    with pytest.raises(ValueError, match="polished-shaft"):
+        run_examples_study(tmp_path / "ex2", objects=["teapot"])
+
+
 def test_a_calibration_rewritten_under_the_same_name_is_read_again(tmp_path, truth_calibration):
     """The per-process plan cache is keyed on the file's version, not only its name."""
     import os

@@ -12,6 +12,7 @@ import numpy as np
 
 from lts360.folders import (FRAME_FILE, frame_file, is_frame, is_scan, section_dir_name,
                              section_dirs, write_scan_meta)
+from lts360.simulator.render import MAX_SPP
 from lts360.cli.usage import UsageError, _progress, _set_variant
 
 
@@ -76,8 +77,8 @@ def cmd_render(args) -> int:
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import simulate_frame, write_frame
 
-    if args.spp < 1 or args.spp > 4096:
-        raise UsageError(f"--spp: must be in [1, 4096], got {args.spp}")
+    if not 1 <= args.spp <= MAX_SPP:
+        raise UsageError(f"--spp: must be in [1, {MAX_SPP}], got {args.spp}")
     if args.seed < 0:
         raise UsageError(f"--seed: must be >= 0, got {args.seed}")
     if not 0 < args.scale <= 1:
@@ -91,8 +92,15 @@ def cmd_render(args) -> int:
     acq = _acquisition(args)
     if acq is None and args.sections > 1 and not args.pitch_mm > 0:
         raise UsageError(f"--pitch-mm: must be > 0 for a scan, got {args.pitch_mm}")
+    if args.roughness is not None and not 0 < args.roughness <= 1:
+        raise UsageError(f"--roughness: must be in (0, 1], got {args.roughness}")
     rig = load_rig(args.rig)
     obj = build_object(args.object)
+    if args.roughness is not None:
+        import dataclasses
+
+        obj = dataclasses.replace(obj, material=dataclasses.replace(
+            obj.material, roughness_alpha=args.roughness))
     if obj.notes.get("part"):  # a user's part: it must fit between the mirrors
         check_in_field(obj, rig)
     out = Path(args.out)
@@ -101,6 +109,7 @@ def cmd_render(args) -> int:
     variant = _set_variant(args.variant)
     kw = dict(spp=args.spp, seed=args.seed, noise=args.noise, laser_on=args.laser == "on",
               ambient=args.ambient, scale=args.scale, max_bounces=args.max_bounces,
+              max_scatter=args.max_scatter,
               thin_lens=not args.pinhole, background_z_mm=args.background_z_mm,
               exposure_time_s=None if args.exposure_us is None else args.exposure_us * 1e-6,
               exposure_fraction=args.exposure_fraction,
@@ -183,7 +192,8 @@ def _render_moving(args, rig, obj, acq, out: Path, variant: str) -> int:
     times = (np.zeros(1) if acq.trigger is None
              else acq.trigger.times_s(n, acq.motion.speed_mm_s, rng=args.seed))
     kw = dict(spp=args.spp, noise=args.noise, scale=args.scale, max_bounces=args.max_bounces,
-              thin_lens=not args.pinhole, step_px=args.step_px, z_mm=args.z_mm)
+              thin_lens=not args.pinhole, step_px=args.step_px, z_mm=args.z_mm,
+              max_scatter=args.max_scatter)
     try:  # everything checked on the first frame before anything is written
         frames = [simulate_moving_frame(rig, obj, acq, t_trigger_s=float(times[0]),
                                         seed=args.seed, **kw)]
@@ -350,8 +360,8 @@ def _twin_corrector(args, cal):
     if args.method != "inverse":
         raise UsageError("--bias-model twin: needs the inverse method (the twin is measured "
                          "with the real image's plan)")
-    if not 1 <= args.twin_spp <= 4096:
-        raise UsageError(f"--twin-spp: must be in [1, 4096], got {args.twin_spp}")
+    if not 1 <= args.twin_spp <= MAX_SPP:
+        raise UsageError(f"--twin-spp: must be in [1, {MAX_SPP}], got {args.twin_spp}")
     if not 0 <= args.twin_axial_mm <= 10:
         raise UsageError(f"--twin-axial-mm: must be in [0, 10], got {args.twin_axial_mm}")
     try:
@@ -589,10 +599,10 @@ def cmd_calibrate(args) -> int:
 
     if args.seed < 0:
         raise UsageError(f"--seed: must be >= 0, got {args.seed}")
-    if not 1 <= args.spp <= 4096:
-        raise UsageError(f"--spp: must be in [1, 4096], got {args.spp}")
-    if args.target_spp is not None and not 1 <= args.target_spp <= 4096:
-        raise UsageError(f"--target-spp: must be in [1, 4096], got {args.target_spp}")
+    if not 1 <= args.spp <= MAX_SPP:
+        raise UsageError(f"--spp: must be in [1, {MAX_SPP}], got {args.spp}")
+    if args.target_spp is not None and not 1 <= args.target_spp <= MAX_SPP:
+        raise UsageError(f"--target-spp: must be in [1, {MAX_SPP}], got {args.target_spp}")
     if args.f_number is not None and not 0.5 <= args.f_number <= 64:
         raise UsageError(f"--f-number: must be in [0.5, 64], got {args.f_number}")
     if args.camera_model is not None and not 0 <= args.camera_model <= 5:

@@ -22,6 +22,7 @@ from lts360.cli.studies import (
     cmd_study_bias,
     cmd_study_design_space,
     cmd_study_examples,
+    cmd_study_interreflection,
     cmd_study_line_speed,
     cmd_study_monte_carlo,
     cmd_study_plug_gauge,
@@ -69,6 +70,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--scale", type=float, default=1.0, help="image scale in (0, 1]")
     s.add_argument("--max-bounces", type=int, choices=(0, 1, 2, 3), default=2,
                    help="mirror reflections followed on camera and laser paths (default 2)")
+    s.add_argument("--max-scatter", type=int, choices=(0, 1, 2, 3), default=0,
+                   help="interreflections of the laser light on the object (default 0: none)")
+    s.add_argument("--roughness", type=float, default=None, metavar="ALPHA",
+                   help="override the GGX roughness α of the object's material, in (0, 1]")
     s.add_argument("--pinhole", action="store_true", help="pinhole instead of the thin lens")
     s.add_argument("--exposure-us", type=float, default=None,
                    help="fixed exposure time (default: auto-exposure)")
@@ -296,6 +301,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="master the compensation with the gauge's known diameter")
     q.add_argument("--bias-model", choices=("none", "twin"), default="none",
                    help="twin: each placement (and the master's shots) corrected by its twin")
+    q.add_argument("--max-scatter", type=int, choices=(0, 1, 2, 3), default=0,
+                   help="interreflections of the laser light in the gauge's images (default 0)")
     q.set_defaults(func=cmd_study_plug_gauge)
 
     q = study_parser("monte-carlo", "GUM Supplement 1 Monte Carlo of the gauge radius, GUM "
@@ -330,6 +337,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default: the frames' true one)")
     q.add_argument("--section-scale", type=float, default=1.0,
                    help="fraction of the paper's sections to scan (quick looks)")
+    q.add_argument("--max-scatter", type=int, choices=(0, 1, 2, 3), default=0,
+                   help="interreflections of the laser light (default 0: none)")
     q.set_defaults(func=cmd_study_examples)
 
     q = study_parser("line-speed", "a moving object: speed × exposure × shutter (global, "
@@ -350,6 +359,19 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--scale", type=float, default=0.5, help="image scale (default 0.5)")
     q.add_argument("--rig", default="paper")
     q.set_defaults(func=cmd_study_line_speed)
+
+    q = studies.add_parser("interreflection", help="interreflected laser light against "
+                           "Mitsuba's path integrator (corner, shiny cylinder) and figures of "
+                           "the secondary stripes")
+    q.add_argument("--out", required=True, help="output directory")
+    q.add_argument("--figures", default="polished-shaft,alu-pipe,cut-tube",
+                   help="comma-separated objects to draw (default polished-shaft,alu-pipe,"
+                        "cut-tube)")
+    q.add_argument("--figure-spp", type=int, default=64)
+    q.add_argument("--skip-validation", action="store_true",
+                   help="only the figures (the path comparison takes minutes)")
+    q.add_argument("--variant", default=None, help="Mitsuba variant (default llvm_ad_mono)")
+    q.set_defaults(func=cmd_study_interreflection)
 
     q = study_parser("bias", "the plug gauge's line-centre bias over diameters and placements, "
                      "as measured and corrected by the digital twin (true calibration, no "

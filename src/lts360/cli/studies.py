@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lts360.simulator.render import MAX_SPP
 from lts360.cli.usage import UsageError, _set_variant
 
 
@@ -69,8 +70,8 @@ def cmd_study_plug_gauge(args) -> int:
                                  noise=args.noise, spp=args.spp, rig=args.rig,
                                  compensation_shots=args.compensation_shots,
                                  placement_mm=args.placement_mm, master=args.master,
-                                 bias_model=args.bias_model,
-                                 workers=args.workers or 1, **common)
+                                 bias_model=args.bias_model, workers=args.workers or 1,
+                                 max_scatter=args.max_scatter, **common)
     print(format_gauge_table(table))
     print(f"wrote {args.out}/ (table.txt, table.json, plug-gauge.png, trials/results.nc)")
     return 0
@@ -113,20 +114,23 @@ def cmd_study_monte_carlo(args) -> int:
 
 def cmd_study_examples(args) -> int:
     from lts360.experiments.examples_study import (
+        EXTRA_EXAMPLES,
         PAPER_EXAMPLES,
         format_examples,
         run_examples_study,
     )
 
     common = _study_common(args)
-    objects = _objects_arg(args.objects, list(PAPER_EXAMPLES), PAPER_EXAMPLES)
+    objects = _objects_arg(args.objects, list(PAPER_EXAMPLES) + list(EXTRA_EXAMPLES),
+                           PAPER_EXAMPLES)
     if not 0 < args.section_scale <= 1:
         raise UsageError(f"--section-scale: must be in (0, 1], got {args.section_scale}")
     _optional_file(args.calibration, "--calibration")
     _set_variant(args.variant)
     table = run_examples_study(args.out, objects=objects, noise=args.noise, spp=args.spp,
                                calibration=args.calibration, section_scale=args.section_scale,
-                               workers=args.workers or 1, **common)
+                               workers=args.workers or 1, max_scatter=args.max_scatter,
+                               **common)
     print(format_examples(table))
     print(f"wrote {args.out}/ (table.txt, clouds/*.ply, figures/*.png, trials/results.nc)")
     return 0
@@ -231,8 +235,8 @@ def cmd_study_line_speed(args) -> int:
         raise UsageError(f"--accuracy-um: must be > 0, got {args.accuracy_um}")
     if not 0 < args.scale <= 1:
         raise UsageError(f"--scale: must be in (0, 1], got {args.scale}")
-    if not 1 <= args.spp <= 4096:
-        raise UsageError(f"--spp: must be in [1, 4096], got {args.spp}")
+    if not 1 <= args.spp <= MAX_SPP:
+        raise UsageError(f"--spp: must be in [1, {MAX_SPP}], got {args.spp}")
     _study_rig(args.rig)
     _set_variant(args.variant)
     try:
@@ -268,8 +272,8 @@ def cmd_study_bias(args) -> int:
     if any(not 1 <= d <= 60 for d in diameters):
         raise UsageError(f"--diameters-mm: each in [1, 60] mm, got {args.diameters_mm!r}")
     for name in ("spp", "twin_spp"):
-        if not 1 <= getattr(args, name) <= 4096:
-            raise UsageError(f"--{name.replace('_', '-')}: must be in [1, 4096], got "
+        if not 1 <= getattr(args, name) <= MAX_SPP:
+            raise UsageError(f"--{name.replace('_', '-')}: must be in [1, {MAX_SPP}], got "
                              f"{getattr(args, name)}")
     _study_rig(args.rig)
     _set_variant(args.variant)
@@ -278,4 +282,40 @@ def cmd_study_bias(args) -> int:
                            workers=args.workers or 1, variant=args.variant, **common)
     print(format_bias_table(table))
     print(f"wrote {args.out}/ (table.txt, table.json, trials/results.nc)")
+    return 0
+
+
+def cmd_study_interreflection(args) -> int:
+    """``lts360 study interreflection``: the interreflected light against Mitsuba's ``path``
+    (``validation.json``) and the secondary-stripe figures (``<object>.png``,
+    ``figures.json``)."""
+    import json
+
+    from lts360.experiments.interreflection import secondary_stripe_figure, validate_against_path
+    from lts360.scenes.objects import object_types
+
+    names = [n.strip() for n in args.figures.split(",") if n.strip()]
+    unknown = [n for n in names if n not in object_types()]
+    if unknown:
+        raise UsageError(f"--figures: unknown object {unknown[0]!r}; choose from "
+                         f"{', '.join(object_types())}")
+    if args.figure_spp < 1 or args.figure_spp > MAX_SPP:
+        raise UsageError(f"--figure-spp: must be in [1, {MAX_SPP}], got {args.figure_spp}")
+    _set_variant(args.variant)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    if not args.skip_validation:
+        val = validate_against_path()
+        (out / "validation.json").write_text(json.dumps(val, indent=2))
+        for name, c in val.items():
+            print(f"{name}: ours {c['total_a']:.3f} ± {c['se_total_a']:.3f}, path "
+                  f"{c['total_b']:.3f} ± {c['se_total_b']:.3f} "
+                  f"({100 * c['rel_diff_total']:+.2f} %), chi2/dof {c['chi2_per_dof']:.3f} over "
+                  f"{c['n_pixels']} px, |z| > 4: {100 * c['frac_abs_z_over_4']:.2f} %", flush=True)
+    figs = {}
+    for name in names:
+        figs[name] = secondary_stripe_figure(name, out / f"{name}.png", spp=args.figure_spp)
+        print(f"{name}: laser light +{100 * figs[name]['gain']:.1f} %, secondary peak "
+              f"{figs[name]['secondary_peak_over_primary_peak']:.3g} of the primary", flush=True)
+    (out / "figures.json").write_text(json.dumps(figs, indent=2))
     return 0

@@ -26,7 +26,7 @@ import numpy as np
 
 from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study
 
-__all__ = ["PAPER_EXAMPLES", "examples_trial", "run_examples_study", "format_examples"]
+__all__ = ["PAPER_EXAMPLES", "EXTRA_EXAMPLES", "examples_trial", "run_examples_study", "format_examples"]
 
 #: Paper §4.6: object → (figure, sections, pitch mm).
 PAPER_EXAMPLES = {
@@ -34,6 +34,8 @@ PAPER_EXAMPLES = {
     "cable-6": (14, 40, 0.34), "cable-8": (15, 39, 0.34), "cube": (16, 25, 0.68),
     "undercut-shaft": (17, 25, 0.68), "cut-tube": (18, 25, 0.68),
 }
+#: Objects beyond the paper's, scanned as the paper scans its shafts (figure 0: none).
+EXTRA_EXAMPLES = {"polished-shaft": (0, 25, 0.68)}
 VIEW_COLOURS = {0: "tab:red", 1: "tab:blue", 2: "tab:green"}
 
 
@@ -66,7 +68,8 @@ def examples_trial(trial: Trial) -> TrialOutput:
     for k, z in enumerate(zs):
         t0 = time.perf_counter()
         frame = simulate_frame(rig, obj, z_mm=float(z), spp=int(p["spp"]),
-                               seed=trial.seed + k, noise=p["noise"], scenes=scenes)
+                               seed=trial.seed + k, noise=p["noise"], scenes=scenes,
+                               max_scatter=int(p.get("max_scatter", 0)))
         t_render += time.perf_counter() - t0
         if rig_truth is None:
             rig_truth = json.loads(json.dumps(frame.truth, default=lambda v: v.tolist()))
@@ -171,22 +174,28 @@ def _figure(obj, cloud, zs, path: Path, metrics: dict) -> None:
 def run_examples_study(out_dir, *, objects=None, seed: int = 0, noise: str = "realistic",
                        spp: int = 16, calibration=None, theta_step_deg: float = 0.2,
                        r_step_mm: float = 0.01, section_scale: float = 1.0, rig: str = "paper",
-                       workers: int | None = 1, dask_address: str | None = None) -> dict:
-    """Run the examples; ``section_scale`` < 1 scans fewer sections (quick looks)."""
+                       workers: int | None = 1, dask_address: str | None = None,
+                       max_scatter: int = 0) -> dict:
+    """Run the examples; ``section_scale`` < 1 scans fewer sections (quick looks);
+    ``max_scatter`` > 0 renders the laser light's interreflections (the objects of
+    :data:`EXTRA_EXAMPLES` may be named too)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     names = list(objects or PAPER_EXAMPLES)
     params = []
     for name in names:
-        if name not in PAPER_EXAMPLES:
+        known = PAPER_EXAMPLES | EXTRA_EXAMPLES
+        if name not in known:
             raise ValueError(f"examples: unknown object {name!r}; choose from "
-                             f"{', '.join(PAPER_EXAMPLES)}")
-        fig, n, pitch = PAPER_EXAMPLES[name]
+                             f"{', '.join(known)}")
+        fig, n, pitch = known[name]
         params.append({"object": name, "figure": fig, "sections": max(1, round(n * section_scale)),
                        "pitch_mm": pitch, "noise": noise, "spp": spp, "rig": rig,
                        "calibration": "" if calibration is None else str(Path(calibration).resolve()),
                        "theta_step_deg": theta_step_deg, "r_step_mm": r_step_mm,
                        "out": str(out.resolve())})
+        if max_scatter:  # only then: the trials of earlier studies keep their parameters
+            params[-1]["max_scatter"] = int(max_scatter)
     ds = run_study(out / "trials", plan_trials(params, seed), examples_trial, name="examples",
                    workers=workers, dask_address=dask_address)
     table = {}

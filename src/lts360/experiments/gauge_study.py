@@ -232,7 +232,8 @@ def plug_gauge_trial(trial: Trial) -> TrialOutput:
     # Only the pixels the measurement reads are rendered (the rest of the image is not used).
     frame = simulate_frame(load_rig(p["rig"]), obj, spp=int(p["spp"]), seed=trial.seed,
                            noise=p["noise"],
-                           pixels_xy=gauge_window_pixels(p["calibration"], r_mm, band_mm=band))
+                           pixels_xy=gauge_window_pixels(p["calibration"], r_mm, band_mm=band),
+                           max_scatter=int(p.get("max_scatter", 0)))
     cloud = Path(p["clouds"]) / f"placement_{trial.index:02d}.ply" if p.get("clouds") else None
     m = measure_gauge_image(frame.image, p["calibration"], r_true_mm=r_mm, band_mm=band,
                             compensate=bool(p["compensate"]), cloud_path=cloud,
@@ -301,7 +302,7 @@ def format_gauge_table(ours: dict) -> str:
 
 def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str, spp: int,
                              seed: int, shots: int = 1, master: bool = False,
-                             bias_model: str = "none") -> Path:
+                             bias_model: str = "none", max_scatter: int = 0) -> Path:
     """§4.4: measure the gauge at the nominal position (``shots`` times, turned about its axis
     between shots: new speckle, new sensor noise), put the mirror views on one circle with the
     direct view (:func:`lts360.recon.calibration.compensation.joint_view_offsets`, all shots jointly),
@@ -336,7 +337,8 @@ def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str,
     results = []
     for k in range(int(shots)):
         frame = simulate_frame(load_rig(rig), obj, spp=spp, seed=seed + 777_777 + k, noise=noise,
-                               pixels_xy=gauge_window_pixels(cal_path, r))
+                               pixels_xy=gauge_window_pixels(cal_path, r),
+                               max_scatter=max_scatter)
         res = inverse_triangulate(frame.image, cal, grid)
         if master and bias_model == "twin":
             from lts360.twin import TwinCorrector, twin_corrected_raw
@@ -361,7 +363,8 @@ def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str,
 def ensure_calibration(out: Path, calibration=None, *, rig: str = "paper", noise: str = "realistic",
                        seed: int = 0, spp: int = 16, compensate: bool = True,
                        calibrate_options: dict | None = None, compensation_shots: int = 1,
-                       master: bool = False, bias_model: str = "none", say=print) -> Path:
+                       master: bool = False, bias_model: str = "none", say=print,
+                       max_scatter: int = 0) -> Path:
     """The calibration a study measures with: ``calibration`` if given, else one estimated from
     rendered chessboard images into ``out/calibration/`` (kept for the next run); with
     ``compensate``, a copy with the §4.4 view offsets from ``compensation_shots`` shots of the
@@ -379,7 +382,8 @@ def ensure_calibration(out: Path, calibration=None, *, rig: str = "paper", noise
     if compensate:
         calibration = _compensated_calibration(calibration, out, rig=rig, noise=noise, spp=spp,
                                                seed=seed, shots=compensation_shots,
-                                               master=master, bias_model=bias_model)
+                                               master=master, bias_model=bias_model,
+                                               max_scatter=max_scatter)
     return calibration
 
 
@@ -388,11 +392,14 @@ def run_plug_gauge_study(out_dir, *, trials: int = 10, seed: int = 0, calibratio
                          compensate: bool = True, workers: int | None = 1,
                          dask_address: str | None = None, calibrate_options: dict | None = None,
                          compensation_shots: int = 1, placement_mm: float = DEFAULT_PLACEMENT_MM,
-                         master: bool = False, bias_model: str = "none", say=print) -> dict:
+                         master: bool = False, bias_model: str = "none", say=print,
+                         max_scatter: int = 0) -> dict:
     """Calibrate (unless ``calibration``), compensate, measure ``trials`` placements (offsets
     drawn in a disc of radius ``placement_mm``), tabulate (also against the offset).
     ``master``: the compensation mastered with the gauge's known diameter; ``bias_model``
-    ``"twin"``: each placement (and the master's shots) corrected by its twin."""
+    ``"twin"``: each placement (and the master's shots) corrected by its twin.
+    ``max_scatter`` > 0 renders the gauge's shots (compensation and placements, not the
+    chessboards) with interreflected laser light."""
     if bias_model not in ("none", "twin"):
         raise ValueError(f"bias_model must be none or twin, got {bias_model!r}")
     placement_band_mm(placement_mm)  # validates
@@ -401,11 +408,13 @@ def run_plug_gauge_study(out_dir, *, trials: int = 10, seed: int = 0, calibratio
     calibration = ensure_calibration(out, calibration, rig=rig, noise=noise, seed=seed, spp=spp,
                                      compensate=compensate, calibrate_options=calibrate_options,
                                      compensation_shots=compensation_shots, master=master,
-                                     bias_model=bias_model, say=say)
+                                     bias_model=bias_model, say=say, max_scatter=max_scatter)
     params = [dict(p, calibration=str(calibration.resolve()), noise=noise, spp=spp, rig=rig,
                    compensate=compensate, bias_model=bias_model, clouds=str((out / "clouds").resolve()),
                    placement_mm=float(placement_mm))
               for p in gauge_placements(trials, seed, offset_mm=placement_mm)]
+    if max_scatter:  # only then: the trials of earlier studies keep their parameters
+        params = [dict(p, max_scatter=int(max_scatter)) for p in params]
     ds = run_study(out / "trials", plan_trials(params, seed), plug_gauge_trial, name="plug-gauge",
                    workers=workers, dask_address=dask_address,
                    attrs={"noise": noise, "spp": spp, "rig": rig})

@@ -70,6 +70,15 @@ MATERIALS: dict[str, Material] = {m.name: m for m in (
     # Brass: glossy, warm; the conductor lobe dominates.
     Material("brass", diffuse_reflectance=0.15, specular_weight=0.65, roughness_alpha=0.10,
              eta=0.44, k=3.60),
+    # Polished (lapped, mirror-like) aluminium: almost all conductor lobe, a narrow one; the
+    # diffuse share (1 - w)·ρ = 0.02 stands for the residual haze of polishing marks.
+    Material("polished-aluminium", diffuse_reflectance=0.20, specular_weight=0.90,
+             roughness_alpha=0.04, eta=1.49, k=7.82),
+    # Glossy black plastic (ABS/PMMA-like): a dielectric coat, Fresnel 4-5 % at normal
+    # incidence (n = 1.5; a conductor lobe with k = 0 reflects as a dielectric), over a black
+    # body (diffuse share (1 - w)·ρ = 0.03).
+    Material("glossy-black-plastic", diffuse_reflectance=0.30, specular_weight=0.90,
+             roughness_alpha=0.08, eta=1.50, k=0.0),
 )}
 
 

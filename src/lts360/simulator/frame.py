@@ -64,7 +64,7 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
                    speckle_seed: int | None = None, background_z_mm: float | None = None,
                    exposure_fraction: float = 0.8, extra_meshes: tuple = (),
                    pixels_xy: np.ndarray | None = None, support: str = "geometric",
-                   scenes=None) -> Frame:
+                   scenes=None, max_scatter: int = 0) -> Frame:
     """Render one frame of ``obj`` in ``rig`` at stage height ``z_mm``.
 
     Parameters
@@ -92,7 +92,8 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
         Overrides ``support``.
     support : {"geometric", "pilot", "full"}
         Which pixels are rendered at ``spp`` (:mod:`lts360.simulator.support`).
-        ``geometric`` (default): every pixel that can hold direct laser light, from the scene's
+        ``geometric`` (default; ``full`` when ``max_scatter`` > 0, since interreflected light
+        lies off the geometric stripe): every pixel that can hold direct laser light, from the scene's
         geometry (the sheet's slab on every shape, seen through every view, widened by the
         defocus blur); ``pilot``: the pixels a low-spp full render of the same integrator
         lights (for light the geometry does not bound, e.g. interreflections); ``full``:
@@ -103,6 +104,8 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
     scenes : lts360.simulator.reuse.SceneCache, optional
         Build once, render many: a loop passes one cache to all its frames, and a frame
         whose shapes only moved reuses the loaded scene (same image as a fresh load).
+    max_scatter : int, [0, 3]
+        Interreflected laser light (the object onto itself, glints via a mirror); ``0``: none.
     """
     if noise not in NOISE_MODES:
         raise ValueError(f"noise must be one of {', '.join(NOISE_MODES)}, got {noise!r}")
@@ -113,7 +116,7 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
     spec = SceneSpec(rig, meshes, ambient=ambient, background_z_mm=background_z_mm)
     res, sup = render_frame(spec, spp=spp, seed=seed, scale=scale, max_bounces=max_bounces,
                             thin_lens=thin_lens, laser_on=laser_on, pixels_xy=pixels_xy,
-                            support=support, scenes=scenes)
+                            support=support, scenes=scenes, max_scatter=max_scatter)
     image, exposure_time_s, magnification = sensor_image(
         rig, res, noise=noise, seed=seed, speckle_seed=speckle_seed, scale=scale,
         exposure_time_s=exposure_time_s, exposure_fraction=exposure_fraction)
@@ -126,8 +129,8 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
                    "measured_zone_z_mm": list(obj.measured_zone_z_mm), **part_truth(obj)},
         "stage": {"z_mm": float(z_mm), "axis": [0.0, 0.0, 1.0]},
         "render": {"variant": res.variant, "spp": res.spp, "seed": res.seed, "scale": scale,
-                   "max_bounces": max_bounces, "thin_lens": thin_lens, "laser_on": laser_on,
-                   "ambient": ambient, "background_z_mm": background_z_mm,
+                   "max_bounces": max_bounces, "max_scatter": max_scatter,
+                   "thin_lens": thin_lens, "laser_on": laser_on, "ambient": ambient, "background_z_mm": background_z_mm,
                    "seconds": res.seconds,
                    "pixels": None if pixels_xy is None else int(len(pixels_xy)),
                    "support": sup.to_dict()},
@@ -141,7 +144,7 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
 
 def render_frame(spec: SceneSpec, *, spp: int, seed: int, scale: float = 1.0, max_bounces: int = 2,
                  thin_lens: bool = True, laser_on: bool = True, pixels_xy=None,
-                 support: str = "geometric", scenes=None
+                 support: str = "geometric", scenes=None, max_scatter: int = 0
                  ) -> tuple[RenderResult, PixelSupport]:
     """The radiance of a frame, rendered on its pixel support (``simulate_frame``'s render).
 
@@ -154,7 +157,11 @@ def render_frame(spec: SceneSpec, *, spp: int, seed: int, scale: float = 1.0, ma
         A window: only its pixels may be rendered (those of the support among them); the
         rest of the frame is 0.
     support : {"geometric", "pilot", "full"}
-        See :func:`simulate_frame`.
+        See :func:`simulate_frame`.  With ``max_scatter`` > 0 a ``geometric`` support becomes
+        ``full``: interreflected light lies off the geometric stripe, and a low-spp pilot
+        misses its faint, noisy pixels (ask for ``pilot`` explicitly to trade that for speed).
+    max_scatter : int, [0, 3]
+        Interreflections (:func:`lts360.simulator.integrator.make_integrator`).
     scenes : lts360.simulator.reuse.SceneCache, optional
         Scenes built once for a loop: the scene is reused (vertices moved) when it can be.
 
@@ -177,8 +184,10 @@ def render_frame(spec: SceneSpec, *, spp: int, seed: int, scale: float = 1.0, ma
     t0 = time.perf_counter()
     if not laser_on:  # no laser light: every pixel holds only what the whole image holds
         support = "full"
+    if max_scatter > 0 and support == "geometric":  # light off the geometric stripe
+        support = "full"
     kw = dict(spp=spp, scale=scale, max_bounces=max_bounces, thin_lens=thin_lens,
-              laser_on=laser_on)
+              laser_on=laser_on, max_scatter=max_scatter)
     w, h = support_mod.film_size(spec.rig.camera, scale)
     if support == "full" and pixels_xy is None and scenes is None:
         return render_radiance(spec, seed=seed, **kw), support_mod.full_support(spec.rig.camera, scale)
@@ -189,7 +198,8 @@ def render_frame(spec: SceneSpec, *, spp: int, seed: int, scale: float = 1.0, ma
         if support == "geometric":
             return support_mod.geometric_support(spec, **geo)
         if support == "pilot":
-            return support_mod.pilot_support(spec, seed=seed, prepared=prepared, **geo)
+            return support_mod.pilot_support(spec, seed=seed, prepared=prepared,
+                                             max_scatter=max_scatter, **geo)
         return support_mod.full_support(spec.rig.camera, scale)
 
     sup = make() if scenes is None else scenes.support(spec, make, method=support, **geo)

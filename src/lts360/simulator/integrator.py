@@ -17,17 +17,27 @@ Light paths simulated (L laser, S mirror, D any non-delta surface, E camera, A a
 * ``A D (S){0..K} E`` — ambient light (constant environment) by emitter sampling, and
   ``A (S){0..K} E`` for camera rays that escape.
 
-Not simulated: interreflections between non-delta surfaces (laser light scattered by the
-object onto itself or onto a holder, ``L … D D … E``), glossy-to-mirror laser paths
-(``L D S D E``: laser light reflected by a shiny object via a mirror onto the object — the
-"multiple reflections" of paper §3.1 that arise from glossy surfaces), ambient light reaching
-the object through a mirror, the laser aperture seen by the camera, and subsurface scattering
-(the stripe in white PVC is slightly wider in reality).  Coherent effects (speckle) are added
-in the sensor stage, not here.
+* ``L (S){0..K} D ((S){0..K} D){1..N} (S){0..K} E`` with ``N = max_scatter`` (0–3, default
+  0) — interreflected laser light: laser light scattered by the object onto itself or onto a
+  holder (``L D D E``), and glints carried by a mirror onto the object (``L D S D E``: the
+  "multiple reflections" of paper §3.1 that arise from glossy surfaces).  Added camera-side:
+  from the first non-delta point ``x₁`` the camera ray reaches, the BSDF is sampled
+  (``bsdf.sample``: cosine-weighted for the diffuse lobe, GGX visible normals for the glossy
+  one), the ray is followed through up to ``K`` mirrors to the next non-delta point ``x₂``,
+  and the laser's direct light there (every virtual laser, the same visibility tests) times
+  ``f(x₂; → laser, → x₁)`` is added with the path throughput ``f cosθ / pdf``; repeated
+  ``N`` times.  With ``max_scatter = 0`` nothing of this runs (the image is bit-identical to
+  the single-scatter integrator's).  The estimator's variance is discussed in
+  ``docs/simulator.md``.
+
+Not simulated: ambient light that is scattered more than once (it is shaded at ``x₁`` only),
+ambient light reaching the object through a mirror, the laser aperture seen by the camera,
+and subsurface scattering (the stripe in white PVC is slightly wider in reality).  Coherent
+effects (speckle) are added in the sensor stage, not here.
 
 Units: millimetres in the scene; the output is radiance in W m⁻² sr⁻¹ at the laser wavelength.
-The laser-only radiance is returned as the AOV ``laser`` so that speckle can multiply only
-the coherent part.
+The laser-only radiance (direct and interreflected) is returned as the AOV ``laser`` so that
+speckle can multiply only the coherent part.
 """
 
 from __future__ import annotations
@@ -37,7 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["LaserParams", "MirrorParams", "laser_params", "make_integrator"]
+__all__ = ["LaserParams", "MirrorParams", "check_max_scatter", "laser_params", "make_integrator"]
 
 #: How far along a reflected ray its origin is put past the mirror (mm): far enough to clear the
 #: mirror in float32 at ~100 mm coordinates (ulp ~8e-6 mm), on the exact reflected line.
@@ -110,6 +120,13 @@ def laser_params(rig, *, laser_on: bool = True, mirrors=None
     return lp, mps
 
 
+def check_max_scatter(max_scatter) -> None:
+    """``ValueError`` naming ``max_scatter`` and its range unless it is an integer in [0, 3]."""
+    if isinstance(max_scatter, bool) or not isinstance(max_scatter, (int, np.integer)) \
+            or not 0 <= max_scatter <= 3:
+        raise ValueError(f"max_scatter must be an integer in [0, 3], got {max_scatter!r}")
+
+
 def _sequences(n_mirrors: int, max_bounces: int) -> list[tuple[int, ...]]:
     from lts360.scenes.coverage import mirror_sequences
 
@@ -117,7 +134,8 @@ def _sequences(n_mirrors: int, max_bounces: int) -> list[tuple[int, ...]]:
 
 
 def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, max_bounces: int = 2,
-                    ambient: bool = False, clearance_mm: float = SHADOW_CLEARANCE_MM):
+                    ambient: bool = False, clearance_mm: float = SHADOW_CLEARANCE_MM,
+                    max_scatter: int = 0):
     """Build the integrator (the Mitsuba variant must already be set).
 
     Parameters
@@ -135,6 +153,9 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
     clearance_mm : float, > 0
         How far in front of a mirror's plane a shadow ray restarts after it (the mirror's own
         shape must not occlude it).
+    max_scatter : int, [0, 3]
+        Interreflections of the laser light between non-delta surfaces (``0``: none, the
+        single-scatter image bit for bit).
     """
     import drjit as dr
     import mitsuba as mi
@@ -143,6 +164,7 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
         raise ValueError(f"max_bounces must be in [0, 3], got {max_bounces}")
     if not 0 < clearance_mm <= 1.0:
         raise ValueError(f"clearance_mm must be in (0, 1], got {clearance_mm}")
+    check_max_scatter(max_scatter)
     seqs = _sequences(len(mirrors), max_bounces)
     O = np.asarray(laser.origin_mm)
     n_l = np.asarray(laser.normal)
@@ -186,7 +208,8 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
             return ["laser"]
 
         def to_string(self):
-            return f"LaserTriangulationIntegrator[max_bounces={max_bounces}, paths={len(seqs)}]"
+            return (f"LaserTriangulationIntegrator[max_bounces={max_bounces}, "
+                    f"max_scatter={max_scatter}, paths={len(seqs)}]")
 
         def _irradiance_perp(self, xp):
             """Irradiance (W/mm²) on a plane normal to the beam at unfolded points ``xp``."""
@@ -310,7 +333,51 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
                 ds, em_w = scene.sample_emitter_direction(si, sampler.next_2d(found), True, found)
                 f = bsdf.eval(ctx, si, si.to_local(ds.d), found)
                 L += dr.select(found & (ds.pdf > 0), throughput * f * em_w, 0.0)
+            if max_scatter > 0 and laser.power_W != 0.0:
+                L_scatter = self._scatter(scene, sampler, si, bsdf, throughput, found)
+                L_laser = L_laser + L_scatter
+                L = L + L_scatter
             aov = L_laser[0] if mi.is_monochromatic else mi.luminance(L_laser)
             return L, mi.Bool(True), [aov]
+
+        def _scatter(self, scene, sampler, si, bsdf, throughput, active):
+            """Interreflected laser light seen at ``si`` (``max_scatter`` BSDF-sampled bounces)."""
+            ctx = mi.BSDFContext()
+            out = mi.Spectrum(0.0)
+            beta = mi.Spectrum(throughput)
+            active = mi.Bool(active)
+            for _ in range(max_scatter):
+                if scalar and not active:
+                    break
+                bs, w = bsdf.sample(ctx, si, sampler.next_1d(active), sampler.next_2d(active), active)
+                beta = beta * w
+                active = active & (bs.pdf > 0)
+                ray = si.spawn_ray(si.to_world(bs.wo))
+                # Through up to K mirrors to the next non-delta point (as the camera ray).
+                found = mi.Bool(False)
+                for depth in range(max_bounces + 1):
+                    si = scene.ray_intersect(ray, active)
+                    valid = active & si.is_valid()
+                    if scalar and not valid:
+                        break
+                    bsdf = si.bsdf(ray)
+                    is_mirror = valid & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta)
+                    found = found | (valid & NOT(is_mirror))
+                    if depth == max_bounces:
+                        break
+                    bs_m, w_m = bsdf.sample(ctx, si, sampler.next_1d(is_mirror),
+                                            sampler.next_2d(is_mirror), is_mirror)
+                    beta = dr.select(is_mirror, beta * w_m, beta)
+                    wo = si.to_world(bs_m.wo)
+                    ray = dr.select(is_mirror, mi.Ray3f(si.p + wo * MIRROR_STEP_MM, wo, si.time,
+                                                        si.wavelengths), ray)
+                    active = is_mirror & (bs_m.pdf > 0)
+                if scalar and not found:
+                    break
+                si = scene.ray_intersect(ray, found)
+                active = found & si.is_valid()
+                bsdf = si.bsdf(ray)
+                out += dr.select(active, beta * self._laser(scene, si, bsdf, active), 0.0)
+            return out
 
     return LaserTriangulationIntegrator()

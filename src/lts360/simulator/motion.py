@@ -119,7 +119,8 @@ def simulate_moving_frame(rig: Rig, obj: SceneObject, acq: Acquisition, *,
                           seed: int = 0, noise: str = "none", scale: float = 1.0,
                           max_bounces: int = 2, thin_lens: bool = True,
                           step_px: float = DEFAULT_STEP_PX, n_subframes: int | None = None,
-                          speckle_seed: int | None = None, freeze: bool = False) -> Frame:
+                          speckle_seed: int | None = None, freeze: bool = False,
+                          max_scatter: int = 0) -> Frame:
     """One frame of ``obj`` moving as ``acq.motion`` says, triggered at ``t_trigger_s``
     (the stage at ``z_mm`` then), exposed for ``acq.exposure_time_s`` through ``acq.shutter``.
 
@@ -153,7 +154,8 @@ def simulate_moving_frame(rig: Rig, obj: SceneObject, acq: Acquisition, *,
     if acq.motion.still and n_subframes is None:
         frame = simulate_frame(rig, obj, spp=spp, seed=seed, noise=noise, scale=scale, z_mm=z_mm,
                                max_bounces=max_bounces, thin_lens=thin_lens,
-                               exposure_time_s=acq.exposure_time_s, speckle_seed=speckle_seed)
+                               exposure_time_s=acq.exposure_time_s, speckle_seed=speckle_seed,
+                               max_scatter=max_scatter)
         frame.truth["motion"] = {"acquisition": acq.to_dict(), "t_trigger_s": float(t_trigger_s),
                                  "subframes_per_exposure": 1, "renders": 1}
         return frame
@@ -177,7 +179,8 @@ def simulate_moving_frame(rig: Rig, obj: SceneObject, acq: Acquisition, *,
     mesh = mesh0.copy()
     mesh.apply_transform(T_stage)
     spec = SceneSpec(rig, (("object", mesh, material_to_bsdf(obj.material)),))
-    kw = dict(spp=spp_sub, scale=scale, max_bounces=max_bounces, thin_lens=thin_lens)
+    kw = dict(spp=spp_sub, scale=scale, max_bounces=max_bounces, thin_lens=thin_lens,
+              max_scatter=max_scatter)
     prepared = prepare_scene(spec, **kw)
     params = mi.traverse(prepared[0])
     P0 = np.array(params["object.vertex_positions"], dtype=np.float64).reshape(-1, 3)

@@ -78,7 +78,7 @@ class SceneCache:
         shapes = [(name, _faces_digest(mesh), json.dumps(bsdf, sort_keys=True, default=repr))
                   for name, mesh, bsdf in spec.meshes]
         text = json.dumps([_fingerprint_rig(spec.rig), shapes, spec.ambient,
-                           spec.background_z_mm, len(spec.targets),
+                           spec.background_z_mm, len(spec.targets), repr(spec.laser_mirrors),
                            sorted(render_kw.items())], default=repr)
         return hashlib.sha1(text.encode()).hexdigest()
 

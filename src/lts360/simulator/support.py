@@ -452,7 +452,8 @@ def support_from_mask(lit: np.ndarray, *, margin_px: float, method: str) -> Pixe
 
 def pilot_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_lens: bool = True,
                   spp: int = PILOT_SPP, seed: int = 0, threshold: float = PILOT_THRESHOLD,
-                  margin_px: float = MARGIN_PX, prepared=None) -> PixelSupport:
+                  margin_px: float = MARGIN_PX, prepared=None, max_scatter: int = 0
+                  ) -> PixelSupport:
     """The pixels where a low-spp full-frame render of the real integrator shows laser light.
 
     For light the geometric support does not bound (an integrator that scatters the laser off
@@ -472,7 +473,8 @@ def pilot_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_lens: 
     w, h = film_size(cam, scale)
     px = np.stack(np.meshgrid(np.arange(w), np.arange(h)), axis=-1).reshape(-1, 2)
     _, laser, _ = render_pixels(spec, px, spp=spp, seed=seed, scale=scale,
-                                max_bounces=max_bounces, thin_lens=thin_lens, prepared=prepared)
+                                max_bounces=max_bounces, thin_lens=thin_lens, prepared=prepared,
+                                max_scatter=max_scatter)
     laser = laser.reshape(h, w)
     peak = float(laser.max(initial=0.0))
     if peak <= 0:

@@ -25,6 +25,7 @@ from lts360.scenes.objects import cut_tube  # noqa: F401
 from lts360.scenes.objects import grooved_shaft  # noqa: F401
 from lts360.scenes.objects import cable  # noqa: F401
 from lts360.scenes.objects import cube  # noqa: F401
+from lts360.scenes.objects import polished_shaft  # noqa: F401
 from lts360.scenes.objects import mesh_part  # noqa: F401
 from lts360.scenes.objects import profile_part  # noqa: F401
 from lts360.scenes.objects.base import Placement, SceneObject
