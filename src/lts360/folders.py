@@ -21,7 +21,7 @@ from pathlib import Path
 __all__ = ["FRAME_FILE", "SCAN_FILE", "IMAGE_FILE", "frame_file", "scan_file", "image_file",
            "is_frame", "is_scan", "section_dir_name", "read_frame_meta", "read_scan",
            "section_dirs", "frame_dirs", "frame_metas", "first_frame_meta", "write_json_atomic",
-           "write_scan_meta"]
+           "write_scan_meta", "read_image"]
 
 FRAME_FILE = "frame.json"
 SCAN_FILE = "scan.json"
@@ -119,3 +119,22 @@ def write_json_atomic(path, data, *, indent: int | None = None) -> None:
 def write_scan_meta(folder, data: dict) -> None:
     """Write a scan folder's ``scan.json``."""
     write_json_atomic(scan_file(folder), data)
+
+
+def read_image(path):
+    """A greyscale image (numpy array) from a file (8 or 16 bit as stored; colour converted to
+    grey).
+
+    Raises
+    ------
+    ValueError
+        Not a readable image.
+    """
+    import cv2
+
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise ValueError(f"{path}: not a readable image")
+    if img.ndim == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+    return img

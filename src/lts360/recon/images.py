@@ -1,29 +1,19 @@
-"""What every part of the reconstruction reads from an image: the pixels of a file, and the
-detector's default threshold and saturation level (full scale of the image's type)."""
+"""What every part of the reconstruction reads from an image: the pixels of a file
+(:func:`lts360.folders.read_image`, the folder format's reader), and the detector's default
+threshold and saturation level (full scale of the image's type)."""
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
+
+from lts360.folders import read_image
 
 __all__ = ["read_image", "default_threshold", "default_saturation",
            "DEFAULT_THRESHOLD_FRACTION"]
 
 #: Default threshold as a fraction of full scale (integer images) or of the image maximum.
 DEFAULT_THRESHOLD_FRACTION = 0.1
-
-
-def read_image(path: Path | str) -> np.ndarray:
-    """A greyscale image from a file (8 or 16 bit as stored; colour converted to grey)."""
-    import cv2
-
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise ValueError(f"{path}: not a readable image")
-    if img.ndim == 3:
-        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
-    return img
 
 
 def default_threshold(image: np.ndarray) -> float:

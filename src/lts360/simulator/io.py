@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["atomic_path", "write_png", "read_png", "write_exr", "read_exr", "write_json",
+__all__ = ["atomic_path", "write_png", "write_exr", "read_exr", "write_json",
            "rig_truth", "rig_record"]
 
 
@@ -43,17 +43,6 @@ def write_png(path, image: np.ndarray) -> None:
     with atomic_path(path) as tmp:
         if not cv2.imwrite(str(tmp), img):
             raise OSError(f"could not write {path}")
-
-
-def read_png(path) -> np.ndarray:
-    import cv2
-
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise ValueError(f"{path}: not a readable image")
-    if img.ndim == 3:
-        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
-    return img
 
 
 def write_exr(path, channels: dict[str, np.ndarray]) -> None:
