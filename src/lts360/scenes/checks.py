@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["RigError"]
+__all__ = ["RigError", "check_positive"]
 
 
 class RigError(ValueError):
@@ -21,3 +21,13 @@ def _in_range(field_name: str, value, lo: float, hi: float, *, lo_open=False, un
         (value > lo if lo_open else value >= lo) and value <= hi
     bracket = "(" if lo_open else "["
     _check(ok, field_name, f"must be in {bracket}{lo:g}, {hi:g}]{unit}, got {value!r}")
+
+
+def check_positive(name: str, value) -> None:
+    """Raise ``ValueError`` naming ``name`` unless ``value`` is a positive finite number."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise ValueError(f"{name} must be a positive finite number, got {value!r}")

@@ -47,6 +47,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from lts360.scenes.checks import check_positive as _positive
 from lts360.scenes.sensor import SensorModel
 
 __all__ = [
@@ -582,15 +583,6 @@ def predicted_photon_transfer(electrons_mean, sensor: SensorModel, *,
 
 
 # ------------------------------------------------------------------------------------- checks
-def _positive(name: str, value) -> None:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-
-
 def _in_unit(name: str, value, *, lo_open: bool = False) -> None:
     try:
         v = float(value)

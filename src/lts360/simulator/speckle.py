@@ -58,6 +58,7 @@ import os
 
 import numpy as np
 
+from lts360.scenes.checks import check_positive as _positive
 from lts360.simulator.sensor import _run_blocks, spawn_generators
 
 __all__ = ["working_f_number", "coherent_cutoff_cyc_per_um", "speckle_size_um",
@@ -420,15 +421,6 @@ def _accumulate_rows(J: np.ndarray, Yt: np.ndarray, kx_max: int, Wf: int, s: int
 
 
 # ------------------------------------------------------------------------------------ checks
-def _positive(name: str, value) -> None:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-
-
 def _check_shape(shape) -> tuple[int, int]:
     try:
         H, W = (int(v) for v in shape)
