@@ -20,7 +20,8 @@ from lts360.scenes.objects._params import check_less, check_range
 from lts360.scenes.objects.base import Placement, SceneObject
 from lts360.scenes.objects.mesher import n_theta_for_tolerance
 from lts360.scenes.objects.registry import ObjectType, register
-from lts360.scenes.objects.zoned import MESH_SAFETY, zone_half_mm, zoned_star_object
+from lts360.scenes.objects.zoned import (MESH_SAFETY, axial_step_mm, chord_radius_mm,
+                                         zone_half_mm, zoned_star_object)
 
 NAME = "alu-pipe"
 #: The paper's scan of this object (Fig. 12).
@@ -125,12 +126,11 @@ class AluPipeParams:
             r = R + w + q * np.cos(a)
             r1 = -n * q * np.sin(a)
             r2 = -n * n * q * np.cos(a)
-            kappa = np.abs(r * r + 2.0 * r1 * r1 - r * r2) / (r * r + r1 * r1) ** 1.5
-            r_eq = max(r_eq, float(np.max(kappa * (r * r + r1 * r1))))
+            r_eq = max(r_eq, chord_radius_mm(r, r1, r2))
         budget = MESH_SAFETY * self.mesh_tolerance_mm / 2.0
         n_theta = n_theta_for_tolerance(r_eq, budget)
         k_z = self.waviness_amplitude_mm * (2.0 * np.pi / self.waviness_wavelength_mm) ** 2
-        dz = math.sqrt(8.0 * budget / k_z) if k_z > 0 else 2.0 * ZONE_HALF_MM
+        dz = axial_step_mm(budget, k_z, ZONE_HALF_MM)
         return n_theta, dz
 
     def build(self, placement: Placement = Placement()) -> SceneObject:

@@ -22,7 +22,8 @@ from lts360.scenes.objects._params import check_less, check_range
 from lts360.scenes.objects.base import Placement, SceneObject
 from lts360.scenes.objects.mesher import n_theta_for_tolerance
 from lts360.scenes.objects.registry import ObjectType, register
-from lts360.scenes.objects.zoned import MESH_SAFETY, zone_half_mm, zoned_star_object
+from lts360.scenes.objects.zoned import (MESH_SAFETY, axial_step_mm, chord_radius_mm,
+                                         zone_half_mm, zoned_star_object)
 
 NAME = "pvc-pipe"
 #: The paper's scan of this object (Fig. 11).
@@ -144,8 +145,7 @@ class PvcPipeParams:
             r = R + q * np.cos(a) - c * g
             r1 = -2.0 * q * np.sin(a) - c * g1
             r2 = -4.0 * q * np.cos(a) - c * g2
-            kappa = np.abs(r * r + 2.0 * r1 * r1 - r * r2) / (r * r + r1 * r1) ** 1.5
-            r_eq = max(r_eq, float(np.max(kappa * (r * r + r1 * r1))))
+            r_eq = max(r_eq, chord_radius_mm(r, r1, r2))
         sz = self.dent_sigma_z_mm
         r_sz = self.dent_depth_mm * np.max(np.abs(g1)) / r_min * math.exp(-0.5) / sz
         r_zz = self.dent_depth_mm / sz ** 2
@@ -153,7 +153,7 @@ class PvcPipeParams:
         budget = MESH_SAFETY * self.mesh_tolerance_mm / 2.0
         n_theta = n_theta_for_tolerance(r_eq + r_sz * r_max ** 2, budget)
         k_z = r_zz + r_sz
-        dz = math.sqrt(8.0 * budget / k_z) if k_z > 0 else 2.0 * ZONE_HALF_MM
+        dz = axial_step_mm(budget, k_z, ZONE_HALF_MM)
         return n_theta, dz
 
     def build(self, placement: Placement = Placement()) -> SceneObject:

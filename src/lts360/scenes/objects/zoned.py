@@ -4,6 +4,8 @@ zone and coarsely beyond it."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from lts360.scenes.materials import get_material
@@ -11,7 +13,8 @@ from lts360.scenes.objects.base import Placement, SceneObject
 from lts360.scenes.objects.mesher import star_mesh, zoned_z_grid
 from lts360.scenes.objects.registry import canonical_spec
 
-__all__ = ["MESH_SAFETY", "COARSE_FACTOR", "zone_half_mm", "zoned_star_object"]
+__all__ = ["MESH_SAFETY", "COARSE_FACTOR", "zone_half_mm", "zoned_star_object",
+           "chord_radius_mm", "axial_step_mm"]
 
 #: Share of ``mesh_tolerance_mm`` spent by the meshers' second-order error estimate (half
 #: along θ, half along z); the rest covers higher-order terms and radial-vs-normal distance.
@@ -49,3 +52,17 @@ def zoned_star_object(name: str, params, placement: Placement, *, radius, inner_
                "dz_outside_mm": COARSE_FACTOR * dz_mm,
                "error_bound_outside_zone_mm": COARSE_FACTOR ** 2 / 2.0 * MESH_SAFETY * tol
                + MESH_SAFETY * tol / 2.0})
+
+
+def chord_radius_mm(r, r1, r2) -> float:
+    """The equivalent circle radius of a cross-section's chords, ``max κ (r² + r_θ²)``, from
+    ``r(θ)`` and its first two θ-derivatives on a dense grid: a chord of angle Δθ then has the
+    sagitta of a circle of that radius (κ c² / 8, ``c ≈ √(r² + r_θ²) Δθ``)."""
+    kappa = np.abs(r * r + 2.0 * r1 * r1 - r * r2) / (r * r + r1 * r1) ** 1.5
+    return float(np.max(kappa * (r * r + r1 * r1)))
+
+
+def axial_step_mm(budget_mm: float, k_z: float, zone_half: float) -> float:
+    """The axial step whose sagitta ``k_z Δz² / 8`` is ``budget_mm`` (the whole zone when the
+    surface is straight along the axis, ``k_z = 0``)."""
+    return math.sqrt(8.0 * budget_mm / k_z) if k_z > 0 else 2.0 * zone_half
