@@ -288,21 +288,20 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
                 out += dr.select(lit, f * (E_perp * refl * MM2_PER_M2), 0.0)
             return out
 
-        def sample(self, scene, sampler, ray, medium=None, active=True):
-            # 1. Follow the camera ray through up to K mirror reflections until it meets a
-            #    non-delta surface (escaped rays see the ambient environment).
-            ray = mi.Ray3f(ray)
-            active = mi.Bool(active)
-            throughput = mi.Spectrum(1.0)
+        def _to_surface(self, scene, sampler, ray, active, beta, env=None):
+            """Follow ``ray`` through up to ``max_bounces`` mirror reflections to the first
+            non-delta surface.  Returns ``(ray, found, beta, L_env)``: the last ray (from the
+            last mirror, or the original), whether it meets a non-delta surface, the
+            throughput times the mirrors' weights, and the environment light of rays that
+            escape (``env``: the ambient emitter, or None)."""
+            ctx = mi.BSDFContext()
             L = mi.Spectrum(0.0)
             found = mi.Bool(False)
-            ctx = mi.BSDFContext()
-            env = scene.environment() if ambient else None
             for depth in range(max_bounces + 1):
                 si = scene.ray_intersect(ray, active)
                 valid = active & si.is_valid()
                 if env is not None:
-                    L += dr.select(active & NOT(si.is_valid()), throughput * env.eval(si, active), 0.0)
+                    L += dr.select(active & NOT(si.is_valid()), beta * env.eval(si, active), 0.0)
                 if scalar and not valid:  # a scalar miss has no BSDF to ask for its flags
                     break
                 bsdf = si.bsdf(ray)
@@ -312,7 +311,7 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
                     break
                 bs, w = bsdf.sample(ctx, si, sampler.next_1d(is_mirror), sampler.next_2d(is_mirror),
                                     is_mirror)
-                throughput = dr.select(is_mirror, throughput * w, throughput)
+                beta = dr.select(is_mirror, beta * w, beta)
                 # Start the reflected ray on the exact reflected line, a little way along it:
                 # `spawn_ray` offsets the origin along the mirror normal (~7 µm at these
                 # coordinates), which displaced every mirror view by ~2.5 µm in the section.
@@ -320,6 +319,15 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
                 ray = dr.select(is_mirror, mi.Ray3f(si.p + wo * MIRROR_STEP_MM, wo, si.time,
                                                     si.wavelengths), ray)
                 active = is_mirror & (bs.pdf > 0)
+            return ray, found, beta, L
+
+        def sample(self, scene, sampler, ray, medium=None, active=True):
+            # 1. Follow the camera ray through up to K mirror reflections until it meets a
+            #    non-delta surface (escaped rays see the ambient environment).
+            ctx = mi.BSDFContext()
+            env = scene.environment() if ambient else None
+            ray, found, throughput, L = self._to_surface(scene, sampler, mi.Ray3f(ray),
+                                                         mi.Bool(active), mi.Spectrum(1.0), env)
             # 2. Shade once at that surface: the laser through every mirror sequence (method of
             #    images) and the ambient light by emitter sampling.
             if scalar and not found:
@@ -354,24 +362,7 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
                 active = active & (bs.pdf > 0)
                 ray = si.spawn_ray(si.to_world(bs.wo))
                 # Through up to K mirrors to the next non-delta point (as the camera ray).
-                found = mi.Bool(False)
-                for depth in range(max_bounces + 1):
-                    si = scene.ray_intersect(ray, active)
-                    valid = active & si.is_valid()
-                    if scalar and not valid:
-                        break
-                    bsdf = si.bsdf(ray)
-                    is_mirror = valid & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta)
-                    found = found | (valid & NOT(is_mirror))
-                    if depth == max_bounces:
-                        break
-                    bs_m, w_m = bsdf.sample(ctx, si, sampler.next_1d(is_mirror),
-                                            sampler.next_2d(is_mirror), is_mirror)
-                    beta = dr.select(is_mirror, beta * w_m, beta)
-                    wo = si.to_world(bs_m.wo)
-                    ray = dr.select(is_mirror, mi.Ray3f(si.p + wo * MIRROR_STEP_MM, wo, si.time,
-                                                        si.wavelengths), ray)
-                    active = is_mirror & (bs_m.pdf > 0)
+                ray, found, beta, _ = self._to_surface(scene, sampler, ray, active, beta)
                 if scalar and not found:
                     break
                 si = scene.ray_intersect(ray, found)
