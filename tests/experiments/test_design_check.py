@@ -1,6 +1,6 @@
 """The design model against the rendered Monte Carlo: the comparison runs and its figures are
 sane on the paper rig, and the model is within ±20 % of the simulation at two other designs
-(STUDIES.md "Design space": per point and the image's noise)."""
+(STUDIES.md "Rig design by gradient": per point and the image's noise)."""
 
 from __future__ import annotations
 
