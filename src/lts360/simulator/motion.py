@@ -114,6 +114,49 @@ def _view_rows(rig: Rig, mesh, K: np.ndarray, size: tuple[int, int]) -> dict:
     return out
 
 
+def _render_subframes(rig: Rig, obj: SceneObject, acq: Acquisition, mesh0, T_stage, mids,
+                      parts, *, t_trigger_s: float, seed: int, freeze: bool, spp: int,
+                      scale: float, max_bounces: int, thin_lens: bool, max_scatter: int):
+    """The exposure-weighted sum of the sub-frames' radiance (each renders the rows its part
+    of the exposure reaches, the object moved to that sub-frame's pose).  Returns
+    ``(radiance, laser, seconds)``, full-size float64 arrays."""
+    w, h = _film(rig, scale)
+    radiance = np.zeros((h, w), np.float64)
+    laser = np.zeros((h, w), np.float64)
+    xs = np.arange(w)
+    t0 = time.perf_counter()
+    # The scene is loaded once, with the object at its stage pose; each sub-frame moves its
+    # vertices (and turns its normals) in place: no reloading per sub-frame.
+    import mitsuba as mi
+
+    mesh = mesh0.copy()
+    mesh.apply_transform(T_stage)
+    spec = SceneSpec(rig, (("object", mesh, material_to_bsdf(obj.material)),))
+    kw = dict(spp=spp, scale=scale, max_bounces=max_bounces, thin_lens=thin_lens,
+              max_scatter=max_scatter)
+    prepared = prepare_scene(spec, **kw)
+    params = mi.traverse(prepared[0])
+    P0 = np.array(params["object.vertex_positions"], dtype=np.float64).reshape(-1, 3)
+    has_normals = "object.vertex_normals" in params and len(params["object.vertex_normals"]) > 0
+    N0 = (np.array(params["object.vertex_normals"], dtype=np.float64).reshape(-1, 3)
+          if has_normals else None)
+    for j, (tm, (rows, wts)) in enumerate(zip(mids, parts)):
+        T = acq.motion.transform(t_trigger_s + (0.0 if freeze else tm))
+        params["object.vertex_positions"] = mi.Float((P0 @ T[:3, :3].T + T[:3, 3])
+                                                     .astype(np.float32).ravel())
+        if has_normals:
+            params["object.vertex_normals"] = mi.Float((N0 @ T[:3, :3].T)
+                                                       .astype(np.float32).ravel())
+        params.update()
+        px = np.column_stack([np.tile(xs, len(rows)), np.repeat(rows, w)])
+        rad, las, _ = render_pixels(spec, px, seed=(seed * 100_003 + j) % 2**31,
+                                    prepared=prepared, **kw)
+        wt = np.repeat(wts, w)
+        radiance[px[:, 1], px[:, 0]] += wt * rad
+        laser[px[:, 1], px[:, 0]] += wt * las
+    return radiance, laser, time.perf_counter() - t0
+
+
 def simulate_moving_frame(rig: Rig, obj: SceneObject, acq: Acquisition, *,
                           t_trigger_s: float = 0.0, z_mm: float = 0.0, spp: int = 16,
                           seed: int = 0, noise: str = "none", scale: float = 1.0,
@@ -168,40 +211,10 @@ def simulate_moving_frame(rig: Rig, obj: SceneObject, acq: Acquisition, *,
     spp_sub = max(1, math.isqrt(max(1, spp // n_sub))) ** 2
     require_variant()
     T_stage = stage_transform(z_mm)
-    radiance = np.zeros((h, w), np.float64)
-    laser = np.zeros((h, w), np.float64)
-    xs = np.arange(w)
-    t0 = time.perf_counter()
-    # The scene is loaded once, with the object at its stage pose; each sub-frame moves its
-    # vertices (and turns its normals) in place: no reloading per sub-frame.
-    import mitsuba as mi
-
-    mesh = mesh0.copy()
-    mesh.apply_transform(T_stage)
-    spec = SceneSpec(rig, (("object", mesh, material_to_bsdf(obj.material)),))
-    kw = dict(spp=spp_sub, scale=scale, max_bounces=max_bounces, thin_lens=thin_lens,
-              max_scatter=max_scatter)
-    prepared = prepare_scene(spec, **kw)
-    params = mi.traverse(prepared[0])
-    P0 = np.array(params["object.vertex_positions"], dtype=np.float64).reshape(-1, 3)
-    has_normals = "object.vertex_normals" in params and len(params["object.vertex_normals"]) > 0
-    N0 = (np.array(params["object.vertex_normals"], dtype=np.float64).reshape(-1, 3)
-          if has_normals else None)
-    for j, (tm, (rows, wts)) in enumerate(zip(mids, parts)):
-        T = acq.motion.transform(t_trigger_s + (0.0 if freeze else tm))
-        params["object.vertex_positions"] = mi.Float((P0 @ T[:3, :3].T + T[:3, 3])
-                                                     .astype(np.float32).ravel())
-        if has_normals:
-            params["object.vertex_normals"] = mi.Float((N0 @ T[:3, :3].T)
-                                                       .astype(np.float32).ravel())
-        params.update()
-        px = np.column_stack([np.tile(xs, len(rows)), np.repeat(rows, w)])
-        rad, las, _ = render_pixels(spec, px, seed=(seed * 100_003 + j) % 2**31,
-                                    prepared=prepared, **kw)
-        wt = np.repeat(wts, w)
-        radiance[px[:, 1], px[:, 0]] += wt * rad
-        laser[px[:, 1], px[:, 0]] += wt * las
-    seconds = time.perf_counter() - t0
+    radiance, laser, seconds = _render_subframes(
+        rig, obj, acq, mesh0, T_stage, mids, parts, t_trigger_s=t_trigger_s, seed=seed,
+        freeze=freeze, spp=spp_sub, scale=scale, max_bounces=max_bounces, thin_lens=thin_lens,
+        max_scatter=max_scatter)
     K = scale_intrinsics(rig.camera.K, scale)
     res = RenderResult(radiance_W_m2_sr=radiance.astype(np.float32),
                        laser_W_m2_sr=laser.astype(np.float32), K=K, variant=require_variant(),
@@ -225,7 +238,7 @@ def simulate_moving_frame(rig: Rig, obj: SceneObject, acq: Acquisition, *,
         "render": {"variant": res.variant, "spp": res.spp, "seed": seed, "scale": scale,
                    "max_bounces": max_bounces, "thin_lens": thin_lens, "laser_on": True,
                    "ambient": "off", "background_z_mm": None, "seconds": seconds,
-                   "pixels": None},
+                   "pixels": None, "max_scatter": int(max_scatter)},
         "sensor": {"noise": noise, "exposure_time_s": float(exposure_time_s),
                    "speckle_seed": speckle_seed, "magnification": magnification,
                    "bit_depth": rig.sensor.bit_depth, "model": rig.sensor.to_dict()},
