@@ -228,6 +228,38 @@ class CalibrationPrediction:
                                     "gives e1, e2"}
 
 
+def _laser_lines(laser_shots, R, t, K, nL, dL, n_line: int):
+    """The laser line on every laser board (camera frame), sampled for the plane fit: the
+    model's ``line`` dict (points, weights, each board's plane and axes, repeated per sample)
+    and the detected centres each board stands for.
+
+    Raises
+    ------
+    ValueError
+        The laser sheet misses a board.
+    """
+    P, W, NB, DB, B1, B2, counts = [], [], [], [], [], [], []
+    for s in laser_shots:
+        T = s.board.T_world_board
+        Rb, tb = R @ T[:3, :3], R @ T[:3, 3] + t
+        got = laser_line_samples(Rb, tb, s.board.pattern_size, s.board.square_mm, nL, dL, K,
+                                 n_line=n_line)
+        if got is None:
+            raise ValueError(f"predict_calibration_covariance: the laser sheet misses the "
+                             f"board of {s.name}")
+        P.append(got[0])
+        W.append(np.full(n_line, got[1]))
+        counts.append(got[1] * n_line)
+        NB.append(Rb[:, 2])
+        DB.append(float(Rb[:, 2] @ tb))
+        B1.append(Rb[:, 0])
+        B2.append(Rb[:, 1])
+    line = {"p": _cols(np.concatenate(P)), "w": np.concatenate(W),
+            "n_board": _rep(NB, n_line), "d_board": _rep(DB, n_line),
+            "b1": _rep(B1, n_line), "b2": _rep(B2, n_line)}
+    return line, counts
+
+
 def predict_calibration_covariance(rig, shots, *, sigma_corner_px: float,
                                    sigma_line_px: float, sigma_target_px: float | None = None,
                                    laser_boards_in_mirror_fit: bool = True,
@@ -316,25 +348,7 @@ def predict_calibration_covariance(rig, shots, *, sigma_corner_px: float,
     mir_e2 = np.array([basis[s.mirror][1] for s in laser_shots])
     C, B, _ = board_pose_information(ops, Xl, intr, _rep(mir_n, nl), _rep(mir_d, nl),
                                      _rep(mir_e1, nl), _rep(mir_e2, nl), nl)
-    P, W, NB, DB, B1, B2, counts = [], [], [], [], [], [], []
-    for s in laser_shots:
-        T = s.board.T_world_board
-        Rb, tb = R @ T[:3, :3], R @ T[:3, 3] + t
-        got = laser_line_samples(Rb, tb, s.board.pattern_size, s.board.square_mm, nL, dL, K,
-                                 n_line=n_line)
-        if got is None:
-            raise ValueError(f"predict_calibration_covariance: the laser sheet misses the "
-                             f"board of {s.name}")
-        P.append(got[0])
-        W.append(np.full(n_line, got[1]))
-        counts.append(got[1] * n_line)
-        NB.append(Rb[:, 2])
-        DB.append(float(Rb[:, 2] @ tb))
-        B1.append(Rb[:, 0])
-        B2.append(Rb[:, 1])
-    line = {"p": _cols(np.concatenate(P)), "w": np.concatenate(W),
-            "n_board": _rep(NB, n_line), "d_board": _rep(DB, n_line),
-            "b1": _rep(B1, n_line), "b2": _rep(B2, n_line)}
+    line, counts = _laser_lines(laser_shots, R, t, K, nL, dL, n_line)
     terms = None
     if mirror_into_laser:
         terms = [((np.array([s.mirror == k for s in laser_shots], float)),
