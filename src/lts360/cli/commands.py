@@ -246,6 +246,8 @@ def _scan_calibration_hint(path) -> None:
 def cmd_measure(args) -> int:
     from lts360.recon.model import load_calibration
     from lts360.recon.triangulation.acceptance import refusal, section_coverage
+    from lts360.recon.triangulation.band import (DEFAULT_FIXED_HALF_WIDTH_MM,
+                                                 DEFAULT_FIXED_RADIUS_MM)
     from lts360.recon.triangulation.cloud import write_cloud
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.measure import (collect_sections, measure_sections,
@@ -261,8 +263,8 @@ def cmd_measure(args) -> int:
             raise UsageError(f"--band-mm: must be in (0, 10] about the found profile, got "
                              f"{args.band_mm}")
     else:
-        radius = 10.0 if args.radius_mm is None else args.radius_mm
-        band_mm = 2.0 if args.band_mm is None else args.band_mm
+        radius = DEFAULT_FIXED_RADIUS_MM if args.radius_mm is None else args.radius_mm
+        band_mm = DEFAULT_FIXED_HALF_WIDTH_MM if args.band_mm is None else args.band_mm
         if not radius > 0 or not band_mm > 0 or band_mm >= radius:
             raise UsageError(f"--radius-mm/--band-mm: need 0 < band < radius, got "
                              f"{radius}, {band_mm}")

@@ -10,6 +10,20 @@ from lts360.cli.commands import (
     cmd_measure,
     cmd_score,
 )
+from lts360.inspect.scan import DEFAULT_LUMP_MM
+from lts360.inspect.uncertainty import DEFAULT_DRAWS
+from lts360.recon.calibration.compensation import (
+    DEFAULT_REFERENCE_HALF_WIDTH_MM,
+    DEFAULT_REFERENCE_RADIUS_MM,
+)
+from lts360.recon.triangulation.acceptance import DEFAULT_MIN_COVERAGE
+from lts360.recon.triangulation.band import (
+    DEFAULT_FIXED_HALF_WIDTH_MM,
+    DEFAULT_FIXED_RADIUS_MM,
+    DEFAULT_FOLLOW_HALF_WIDTH_MM,
+)
+from lts360.recon.triangulation.grid import DEFAULT_R_STEP_MM, DEFAULT_THETA_STEP_DEG
+from lts360.twin.debias import DEFAULT_AXIAL_REACH_MM, DEFAULT_TWIN_SPP
 
 
 def add_measure_parsers(sub) -> None:
@@ -31,15 +45,16 @@ def _add_measure_parser(sub) -> None:
     s.add_argument("--method", choices=("inverse", "classic"), default="inverse",
                    help="inverse triangulation (paper §3.2) or the classical image-space baseline")
     s.add_argument("--peak", choices=("centroid", "gauss", "steger"), default="centroid")
-    s.add_argument("--theta-step-deg", type=float, default=0.1)
-    s.add_argument("--r-step-mm", type=float, default=0.005)
+    s.add_argument("--theta-step-deg", type=float, default=DEFAULT_THETA_STEP_DEG)
+    s.add_argument("--r-step-mm", type=float, default=DEFAULT_R_STEP_MM)
     s.add_argument("--radius-mm", type=float, default=None,
                    help="nominal radius: search the fixed band radius ± --band-mm about the axis "
                         "(default: find the band from the image, over every radius the rig can "
-                        "image; the classic method then uses 10)")
+                        f"image; the classic method then uses {DEFAULT_FIXED_RADIUS_MM:g})")
     s.add_argument("--band-mm", type=float, default=None,
-                   help="radial search band ±: about --radius-mm (default 2), or about the "
-                        "profile found from the image (default 1)")
+                   help=f"radial search band ±: about --radius-mm (default "
+                        f"{DEFAULT_FIXED_HALF_WIDTH_MM:g}), or about the profile found from the "
+                        f"image (default {DEFAULT_FOLLOW_HALF_WIDTH_MM:g})")
     s.add_argument("--pitch-mm", type=float, default=None, help="stage pitch for bare images")
     s.add_argument("--compensate", action="store_true",
                    help="apply the calibration's residual compensation (paper §4.4)")
@@ -53,9 +68,10 @@ def _add_measure_parser(sub) -> None:
                         "(within 0.5 mm of a stretch of a view's window where its line faded "
                         "out) and NOTCH (the profile 80 µm below its chord at ±0.5/±1 mm: a "
                         "notch the sheet does not resolve); default on")
-    s.add_argument("--min-coverage", type=float, default=0.5,
+    s.add_argument("--min-coverage", type=float, default=DEFAULT_MIN_COVERAGE,
                    help="refuse (exit 3) a section that measures less than this share of the "
-                        "θ coverage its views predict (default 0.5); a section with no valid "
+                        f"θ coverage its views predict (default {DEFAULT_MIN_COVERAGE:g}); a "
+                        "section with no valid "
                         "point is always refused")
     s.add_argument("--bias-model", choices=("none", "twin"), default="none",
                    help="twin: correct the line-centre bias by measuring each section's digital "
@@ -71,11 +87,12 @@ def _add_measure_parser(sub) -> None:
     s.add_argument("--twin-material", default="ground-steel",
                    help="the twin's surface (see lts360 objects; default ground-steel, the plug "
                         "gauge's)")
-    s.add_argument("--twin-spp", type=int, default=64,
-                   help="samples per pixel of the twin's render (default 64)")
-    s.add_argument("--twin-axial-mm", type=float, default=1.0,
+    s.add_argument("--twin-spp", type=int, default=DEFAULT_TWIN_SPP,
+                   help=f"samples per pixel of the twin's render (default {DEFAULT_TWIN_SPP})")
+    s.add_argument("--twin-axial-mm", type=float, default=DEFAULT_AXIAL_REACH_MM,
                    help="in a scan, sections within this axial distance give each section's twin "
-                        "its slope and curvature along the axis (default 1.0; 0: a straight "
+                        f"its slope and curvature along the axis (default "
+                        f"{DEFAULT_AXIAL_REACH_MM:.1f}; 0: a straight "
                         "prism)")
     s.set_defaults(func=cmd_measure)
 
@@ -89,11 +106,12 @@ def _add_compensate_parser(sub) -> None:
     s.add_argument("--calibration", required=True, help="calibration.json to compensate")
     s.add_argument("--out", required=True, help="the compensated calibration.json")
     s.add_argument("--peak", choices=("centroid", "gauss", "steger"), default="centroid")
-    s.add_argument("--theta-step-deg", type=float, default=0.1)
-    s.add_argument("--r-step-mm", type=float, default=0.005)
-    s.add_argument("--radius-mm", type=float, default=10.0,
-                   help="the reference's nominal radius (default 10)")
-    s.add_argument("--band-mm", type=float, default=1.0, help="radial search band ± (default 1)")
+    s.add_argument("--theta-step-deg", type=float, default=DEFAULT_THETA_STEP_DEG)
+    s.add_argument("--r-step-mm", type=float, default=DEFAULT_R_STEP_MM)
+    s.add_argument("--radius-mm", type=float, default=DEFAULT_REFERENCE_RADIUS_MM,
+                   help=f"the reference's nominal radius (default {DEFAULT_REFERENCE_RADIUS_MM:g})")
+    s.add_argument("--band-mm", type=float, default=DEFAULT_REFERENCE_HALF_WIDTH_MM,
+                   help=f"radial search band ± (default {DEFAULT_REFERENCE_HALF_WIDTH_MM:g})")
     s.add_argument("--master-diameter-mm", default=None, metavar="D[,D2]",
                    help="mastering: the references' known diameters (one: per view a radial "
                         "offset beside the offsets; two or more, ≥ 1 mm apart: also a scale; "
@@ -140,8 +158,8 @@ def _add_inspect_parser(sub) -> None:
                    "measured with: its covariance gives the calibration uncertainty")
     s.add_argument("--truth", default=None, help="rendered frame or scan directory: true "
                    "values beside the measured ones")
-    s.add_argument("--lump-mm", type=float, default=0.05,
-                   help="lump / neck-down threshold on Dmax / Dmin (default 0.05)")
+    s.add_argument("--lump-mm", type=float, default=DEFAULT_LUMP_MM,
+                   help=f"lump / neck-down threshold on Dmax / Dmin (default {DEFAULT_LUMP_MM:g})")
     s.add_argument("--u-radial-mm", type=float, default=0.0,
                    help="type-B standard uncertainty of a radial offset common to a section "
                         "(the rig's error budget): 2u on diameters, u on deviations")
@@ -150,7 +168,8 @@ def _add_inspect_parser(sub) -> None:
                         "and diameters (default: the standard's for the diameter)")
     s.add_argument("--filter", choices=("gaussian", "none"), default="gaussian",
                    help="none: no filter (extremes then carry more noise bias in U)")
-    s.add_argument("--draws", type=int, default=20, help="calibration Monte Carlo draws")
+    s.add_argument("--draws", type=int, default=DEFAULT_DRAWS,
+                   help="calibration Monte Carlo draws")
     s.add_argument("--seed", type=int, default=0)
     s.set_defaults(func=cmd_inspect)
 

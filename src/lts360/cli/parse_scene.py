@@ -4,6 +4,8 @@
 from __future__ import annotations
 
 from lts360.cli.commands import cmd_object, cmd_objects, cmd_render, cmd_rig
+from lts360.scenes.coverage import MAX_BOUNCES
+from lts360.simulator.integrator import MAX_SCATTER
 
 
 def add_scene_parsers(sub) -> None:
@@ -42,9 +44,9 @@ def _add_render_parser(sub) -> None:
     s.add_argument("--laser", choices=("on", "off"), default="on")
     s.add_argument("--ambient", choices=("off", "dim", "bright"), default="off")
     s.add_argument("--scale", type=float, default=1.0, help="image scale in (0, 1]")
-    s.add_argument("--max-bounces", type=int, choices=(0, 1, 2, 3), default=2,
+    s.add_argument("--max-bounces", type=int, choices=tuple(range(MAX_BOUNCES + 1)), default=2,
                    help="mirror reflections followed on camera and laser paths (default 2)")
-    s.add_argument("--max-scatter", type=int, choices=(0, 1, 2, 3), default=0,
+    s.add_argument("--max-scatter", type=int, choices=tuple(range(MAX_SCATTER + 1)), default=0,
                    help="interreflections of the laser light on the object (default 0: none)")
     s.add_argument("--roughness", type=float, default=None, metavar="ALPHA",
                    help="override the GGX roughness α of the object's material, in (0, 1]")

@@ -15,6 +15,8 @@ from lts360.cli.studies import (
     cmd_study_plug_gauge,
 )
 from lts360.cli.usage import _Parser
+from lts360.simulator.integrator import MAX_SCATTER
+from lts360.twin.debias import DEFAULT_TWIN_SPP
 
 
 def add_study_parsers(sub) -> None:
@@ -67,7 +69,7 @@ def _add_plug_gauge(studies) -> None:
                    help="master the compensation with the gauge's known diameter")
     q.add_argument("--bias-model", choices=("none", "twin"), default="none",
                    help="twin: each placement (and the master's shots) corrected by its twin")
-    q.add_argument("--max-scatter", type=int, choices=(0, 1, 2, 3), default=0,
+    q.add_argument("--max-scatter", type=int, choices=tuple(range(MAX_SCATTER + 1)), default=0,
                    help="interreflections of the laser light in the gauge's images (default 0)")
     q.set_defaults(func=cmd_study_plug_gauge)
 
@@ -111,7 +113,7 @@ def _add_examples(studies) -> None:
                    "(default: the frames' true one)")
     q.add_argument("--section-scale", type=float, default=1.0,
                    help="fraction of the paper's sections to scan (quick looks)")
-    q.add_argument("--max-scatter", type=int, choices=(0, 1, 2, 3), default=0,
+    q.add_argument("--max-scatter", type=int, choices=tuple(range(MAX_SCATTER + 1)), default=0,
                    help="interreflections of the laser light (default 0: none)")
     q.set_defaults(func=cmd_study_examples)
 
@@ -166,7 +168,7 @@ def _add_bias(studies) -> None:
                    help="comma-separated x:y offsets from the axis")
     q.add_argument("--noise", choices=("none", "realistic"), default="none")
     q.add_argument("--spp", type=int, default=16)
-    q.add_argument("--twin-spp", type=int, default=64)
+    q.add_argument("--twin-spp", type=int, default=DEFAULT_TWIN_SPP)
     q.add_argument("--rig", default="paper")
     q.set_defaults(func=cmd_study_bias)
 
