@@ -1,8 +1,9 @@
 """The ``lts360`` command line: thin wrappers that parse, validate, call the library, print.
 
 Usage errors (bad arguments, bad specs, bad rig files) print one line on stderr and exit 2.
-``parser`` defines every command, ``commands`` and ``studies`` hold their handlers, ``usage`` the
-error they raise.
+``parser`` builds the command tree from each group's parsers (``parse_scene``, ``parse_measure``,
+``parse_studies``, ``design``); ``commands``, ``studies`` and ``design`` hold the handlers,
+``usage`` the error they raise.
 """
 
 from __future__ import annotations

@@ -246,6 +246,8 @@ def _scan_calibration_hint(path) -> None:
 def cmd_measure(args) -> int:
     from lts360.recon.model import load_calibration
     from lts360.recon.triangulation.acceptance import refusal, section_coverage
+    from lts360.recon.triangulation.band import (DEFAULT_FIXED_HALF_WIDTH_MM,
+                                                 DEFAULT_FIXED_RADIUS_MM)
     from lts360.recon.triangulation.cloud import write_cloud
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.measure import (collect_sections, measure_sections,
@@ -261,8 +263,8 @@ def cmd_measure(args) -> int:
             raise UsageError(f"--band-mm: must be in (0, 10] about the found profile, got "
                              f"{args.band_mm}")
     else:
-        radius = 10.0 if args.radius_mm is None else args.radius_mm
-        band_mm = 2.0 if args.band_mm is None else args.band_mm
+        radius = DEFAULT_FIXED_RADIUS_MM if args.radius_mm is None else args.radius_mm
+        band_mm = DEFAULT_FIXED_HALF_WIDTH_MM if args.band_mm is None else args.band_mm
         if not radius > 0 or not band_mm > 0 or band_mm >= radius:
             raise UsageError(f"--radius-mm/--band-mm: need 0 < band < radius, got "
                              f"{radius}, {band_mm}")
@@ -355,6 +357,7 @@ def _twin_u_mm(cloud_path) -> float | None:
 def _twin_corrector(args, cal):
     """The ``--bias-model twin`` hook, or a usage error naming what is wrong."""
     from lts360.twin import TwinCorrector
+    from lts360.twin.debias import MAX_AXIAL_REACH_MM
     from lts360.twin.rig import twin_design
 
     if args.method != "inverse":
@@ -362,8 +365,9 @@ def _twin_corrector(args, cal):
                          "with the real image's plan)")
     if not 1 <= args.twin_spp <= MAX_SPP:
         raise UsageError(f"--twin-spp: must be in [1, {MAX_SPP}], got {args.twin_spp}")
-    if not 0 <= args.twin_axial_mm <= 10:
-        raise UsageError(f"--twin-axial-mm: must be in [0, 10], got {args.twin_axial_mm}")
+    if not 0 <= args.twin_axial_mm <= MAX_AXIAL_REACH_MM:
+        raise UsageError(f"--twin-axial-mm: must be in [0, {MAX_AXIAL_REACH_MM:g}], got "
+                         f"{args.twin_axial_mm}")
     try:
         return TwinCorrector(cal, twin_design(cal, args.twin_rig), material=args.twin_material,
                              spp=args.twin_spp, axial_reach_mm=args.twin_axial_mm)
@@ -638,6 +642,7 @@ def cmd_calibrate(args) -> int:
 
 def cmd_inspect(args) -> int:
     """``lts360 inspect``: every input is checked before anything is written."""
+    from lts360.inspect.extremes import FILTER_UPR_RANGE
     from lts360.inspect.nominal import ToleranceBand, load_nominal
     from lts360.inspect.report import write_report
     from lts360.inspect.run import inspect_cloud
@@ -658,9 +663,10 @@ def cmd_inspect(args) -> int:
         raise UsageError(f"--u-radial-mm: must be >= 0, got {args.u_radial_mm}")
     if not 2 <= args.draws <= 10000:
         raise UsageError(f"--draws: must be in [2, 10000], got {args.draws}")
+    lo, hi = FILTER_UPR_RANGE
     if args.filter_upr is not None and not (np.isfinite(args.filter_upr)
-                                            and 1 <= args.filter_upr <= 1000):
-        raise UsageError(f"--filter-upr: must be in [1, 1000], got {args.filter_upr:g}")
+                                            and lo <= args.filter_upr <= hi):
+        raise UsageError(f"--filter-upr: must be in [{lo:g}, {hi:g}], got {args.filter_upr:g}")
     if args.filter == "none" and args.filter_upr is not None:
         raise UsageError("--filter-upr: give it or --filter none, not both")
     from lts360.inspect.tolerances import check_ovality_max, parse_diameter_tolerance

@@ -63,11 +63,14 @@ from lts360.inspect.profile import DEFAULT_GAP_DEG, BinnedProfile, uniform_profi
 
 __all__ = ["ISO_DEFAULT_UPR", "default_upr", "gaussian_transfer", "filter_grid",
            "extreme_quantities", "ExtremeNoise", "extreme_noise", "DEFAULT_EXTREME_DRAWS",
-           "EXTREME_KEYS"]
+           "EXTREME_KEYS", "FILTER_UPR_RANGE"]
 
 #: ISO/TS 12181-2 default cut-off (UPR) by diameter: ``(largest diameter in mm, UPR)``.
 ISO_DEFAULT_UPR = ((8.0, 15.0), (25.0, 50.0), (80.0, 150.0), (250.0, 500.0),
                    (float("inf"), 1500.0))
+#: The cut-offs (UPR) a filter may be given, inclusive: from one undulation per revolution to
+#: beyond the standard's finest default (ISO_DEFAULT_UPR's 500 UPR below Ø 250 mm).
+FILTER_UPR_RANGE = (1.0, 1000.0)
 #: Noise draws per section (64 give the bias to about ±12 % of u and u to ±9 %).
 DEFAULT_EXTREME_DRAWS = 64
 #: The quantities the Monte Carlo recomputes.

@@ -11,8 +11,8 @@ import numpy as np
 
 from lts360.inspect import scan as scan_mod
 from lts360.inspect.circles import REFERENCES, least_squares_circle
-from lts360.inspect.extremes import (CIRCLE_SECTIONS, DEFAULT_EXTREME_DRAWS, default_upr,
-                                     extreme_noise)
+from lts360.inspect.extremes import (CIRCLE_SECTIONS, DEFAULT_EXTREME_DRAWS, FILTER_UPR_RANGE,
+                                     default_upr, extreme_noise)
 from lts360.inspect.nominal import Nominal, ToleranceBand, deviations, place_nominal
 from lts360.inspect.profile import DEFAULT_BIN_DEG, DEFAULT_GAP_DEG, valid_mask
 from lts360.inspect.section import MIN_POINTS, SectionResult, analyse_section
@@ -183,8 +183,9 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
     """
     if not (u_radial_mm >= 0 and np.isfinite(u_radial_mm)):
         raise ValueError(f"--u-radial-mm: must be >= 0, got {u_radial_mm}")
-    if filter_upr is not None and not (np.isfinite(filter_upr) and 1 <= filter_upr <= 1000):
-        raise ValueError(f"--filter-upr: must be in [1, 1000], got {filter_upr}")
+    lo, hi = FILTER_UPR_RANGE
+    if filter_upr is not None and not (np.isfinite(filter_upr) and lo <= filter_upr <= hi):
+        raise ValueError(f"--filter-upr: must be in [{lo:g}, {hi:g}], got {filter_upr}")
     if band is not None and nominal is None:
         raise ValueError("--tolerance-mm/--upper-mm/--lower-mm need --nominal")
     if not use_filter and filter_upr is not None:

@@ -31,7 +31,10 @@ from lts360.geometry.mirror_path import PathMirror, rectangle_extent
 from lts360.scenes.rig import Mirror, Rig
 
 __all__ = ["mirror_sequences", "view_name", "path_valid", "CoverageResult", "coverage",
-           "circular_windows"]
+           "circular_windows", "MAX_BOUNCES"]
+
+#: The longest mirror sequence followed on a camera or laser path (also the renderer's).
+MAX_BOUNCES = 3
 
 def mirror_sequences(mirrors: tuple[Mirror, ...], max_bounces: int) -> list[tuple[int, ...]]:
     """Ordered mirror index sequences of length ``0..max_bounces`` without immediate repeats."""
@@ -197,8 +200,8 @@ def coverage(rig: Rig, radius_mm: float, *, theta_step_deg: float = 0.1, max_bou
         raise ValueError(f"radius_mm must be > 0, got {radius_mm}")
     if not 0 < theta_step_deg <= 10:
         raise ValueError(f"theta_step_deg must be in (0, 10], got {theta_step_deg}")
-    if not 0 <= max_bounces <= 3:
-        raise ValueError(f"max_bounces must be in [0, 3], got {max_bounces}")
+    if not 0 <= max_bounces <= MAX_BOUNCES:
+        raise ValueError(f"max_bounces must be in [0, {MAX_BOUNCES}], got {max_bounces}")
     if not 0 < max_incidence_deg <= 90:
         raise ValueError(f"max_incidence_deg must be in (0, 90], got {max_incidence_deg}")
     n = int(round(360.0 / theta_step_deg))

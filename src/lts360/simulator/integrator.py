@@ -47,7 +47,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["LaserParams", "MirrorParams", "check_max_scatter", "laser_params", "make_integrator"]
+from lts360.scenes.coverage import MAX_BOUNCES
+
+__all__ = ["LaserParams", "MirrorParams", "check_max_scatter", "laser_params", "make_integrator",
+           "MAX_SCATTER"]
+
+#: The most interreflections of the laser light between non-delta surfaces.
+MAX_SCATTER = 3
 
 #: How far along a reflected ray its origin is put past the mirror (mm): far enough to clear the
 #: mirror in float32 at ~100 mm coordinates (ulp ~8e-6 mm), on the exact reflected line.
@@ -121,10 +127,12 @@ def laser_params(rig, *, laser_on: bool = True, mirrors=None
 
 
 def check_max_scatter(max_scatter) -> None:
-    """``ValueError`` naming ``max_scatter`` and its range unless it is an integer in [0, 3]."""
+    """``ValueError`` naming ``max_scatter`` and its range unless it is an integer in
+    [0, :data:`MAX_SCATTER`]."""
     if isinstance(max_scatter, bool) or not isinstance(max_scatter, (int, np.integer)) \
-            or not 0 <= max_scatter <= 3:
-        raise ValueError(f"max_scatter must be an integer in [0, 3], got {max_scatter!r}")
+            or not 0 <= max_scatter <= MAX_SCATTER:
+        raise ValueError(f"max_scatter must be an integer in [0, {MAX_SCATTER}], got "
+                         f"{max_scatter!r}")
 
 
 def _sequences(n_mirrors: int, max_bounces: int) -> list[tuple[int, ...]]:
@@ -160,8 +168,8 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
     import drjit as dr
     import mitsuba as mi
 
-    if not 0 <= max_bounces <= 3:
-        raise ValueError(f"max_bounces must be in [0, 3], got {max_bounces}")
+    if not 0 <= max_bounces <= MAX_BOUNCES:
+        raise ValueError(f"max_bounces must be in [0, {MAX_BOUNCES}], got {max_bounces}")
     if not 0 < clearance_mm <= 1.0:
         raise ValueError(f"clearance_mm must be in (0, 1], got {clearance_mm}")
     check_max_scatter(max_scatter)

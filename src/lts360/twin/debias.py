@@ -36,6 +36,7 @@ from lts360.twin.profile import axial_form, loft_mesh, ray_radii, section_profil
 from lts360.twin.rig import laser_side_mirrors, twin_rig
 
 __all__ = ["TwinCorrector", "TwinLog", "twin_corrected_raw", "DEFAULT_TWIN_SPP", "DEFAULT_SMOOTH_DEG", "INPUT_U",
+           "DEFAULT_AXIAL_REACH_MM", "MAX_AXIAL_REACH_MM",
            "perturbed_design"]
 
 DEFAULT_TWIN_SPP = 64
@@ -43,6 +44,8 @@ DEFAULT_SMOOTH_DEG = 3.0
 #: Sections within this axial distance shape the twin along the axis (the sheet lights about
 #: ±0.6 mm of it; a pipe's 5 mm waviness is a quadratic within a few % over ±1 mm).
 DEFAULT_AXIAL_REACH_MM = 1.0
+#: The farthest reach along the axis: beyond it the quadratic form no longer holds a waviness.
+MAX_AXIAL_REACH_MM = 10.0
 #: Passes of a scan's correction when the twin is shaped along the axis: the second reads the
 #: form from the corrected profiles (measured, the alu pipe's 0.1 mm waviness: the sections'
 #: diameter errors −4.5…−7.7 µm after one pass, −2.1…+1.2 µm after two; a third adds nothing).
@@ -203,8 +206,9 @@ class TwinCorrector:
             raise ValueError(f"twin spp must be an integer >= 1, got {self.spp!r}")
         if not 0 < self.smooth_deg <= 30:
             raise ValueError(f"twin smooth_deg must be in (0, 30], got {self.smooth_deg}")
-        if not 0 <= self.axial_reach_mm <= 10:
-            raise ValueError(f"twin axial_reach_mm must be in [0, 10], got {self.axial_reach_mm}")
+        if not 0 <= self.axial_reach_mm <= MAX_AXIAL_REACH_MM:
+            raise ValueError(f"twin axial_reach_mm must be in [0, {MAX_AXIAL_REACH_MM:g}], got "
+                             f"{self.axial_reach_mm}")
         if not 1 <= int(self.axial_passes) <= 5:
             raise ValueError(f"twin axial_passes must be in [1, 5], got {self.axial_passes}")
         self._observed: list = []  # (z_mm, profile in the base frame or None, origin)

@@ -27,7 +27,13 @@ from scipy.optimize import least_squares
 from lts360.geometry.fit import fit_circle
 from lts360.recon.view_points import raw_view_points
 
-__all__ = ["joint_view_offsets", "master_fit", "MasterFit", "MIN_MASTER_SPREAD_MM"]
+__all__ = ["joint_view_offsets", "master_fit", "MasterFit", "MIN_MASTER_SPREAD_MM",
+           "DEFAULT_REFERENCE_RADIUS_MM", "DEFAULT_REFERENCE_HALF_WIDTH_MM"]
+
+#: The round reference of the §4.4 compensation: its nominal radius (the plug gauge's, Ø
+#: 19.9987 mm) and the radial band ± about it its images are measured in.
+DEFAULT_REFERENCE_RADIUS_MM = 10.0
+DEFAULT_REFERENCE_HALF_WIDTH_MM = 1.0
 
 
 def joint_view_offsets(result, *, reference: str = "direct", min_points: int = 10

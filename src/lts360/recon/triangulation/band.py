@@ -48,7 +48,8 @@ from lts360.recon.triangulation.views import (DEFAULT_MAX_INCIDENCE_DEG, DIRECT,
 __all__ = ["BandSearch", "Profile", "follow_profile", "measurable_radii", "profile_windows",
            "self_occluded", "hidden_rows",
            "DEFAULT_COARSE_THETA_STEP_DEG", "DEFAULT_COARSE_R_STEP_MM",
-           "DEFAULT_FOLLOW_HALF_WIDTH_MM", "DEFAULT_OUTLIER_MM"]
+           "DEFAULT_FOLLOW_HALF_WIDTH_MM", "DEFAULT_OUTLIER_MM", "DEFAULT_FIXED_RADIUS_MM",
+           "DEFAULT_FIXED_HALF_WIDTH_MM"]
 
 DEFAULT_COARSE_THETA_STEP_DEG = 1.0
 #: A third of the line's σ along the ray on the paper rig (~0.15 mm): the coarse centroid is
@@ -57,6 +58,11 @@ DEFAULT_COARSE_R_STEP_MM = 0.05
 #: Half-width of the fine band about the first-pass profile: the main run of the line
 #: (±0.4 mm above a 10 % threshold) plus what the running median smooths away.
 DEFAULT_FOLLOW_HALF_WIDTH_MM = 1.0
+#: The fixed band, where the band is not found from the image (a radius given, or the classic
+#: baseline): ``radius ± half-width`` about the axis.  Without a radius, the plug gauge's
+#: (Ø 19.9987 mm); the half-width is the fixed band's when only the radius is given.
+DEFAULT_FIXED_RADIUS_MM = 10.0
+DEFAULT_FIXED_HALF_WIDTH_MM = 2.0
 #: A candidate this far from the running median is not part of the profile.
 DEFAULT_OUTLIER_MM = 0.5
 #: Running median half-length along θ, in coarse steps.
