@@ -302,43 +302,74 @@ def _banner(data: dict) -> str:
 
 
 def _html(data: dict, figs: dict[str, bytes]) -> str:
-    scan = data["scan"]
+    """The self-contained ``report.html`` of the inspection ``data`` (as
+    :func:`lts360.inspect.run.inspect_cloud` makes it) with the figures ``figs`` (name →
+    PNG bytes) inlined as base64: verdict, about, scan summary, events, sections, warnings,
+    gaps and figures, in that order."""
+    head, body = _section_table(data["sections"])
+    return ("<!DOCTYPE html><html><head><meta charset='utf-8'>"
+            "<meta name='viewport' content='width=device-width'><title>lts360 inspection</title>"
+            f"<style>{_STYLE}</style></head><body>" + _banner(data)
+            + f"<h1>Inspection of {html.escape(data['source'])}</h1>"
+            + _table(["", ""], _about_rows(data)).replace("<table>", "<table class='kv'>", 1)
+            .replace("<thead><tr><th></th><th></th></tr></thead>", "", 1)
+            + "<p>Values ± U(k = 2); lengths in mm unless stated. Roundness RONt against the"
+            " ISO 12181 reference circles LSCI, MZCI, MCCI, MICI. Ovality Δ/Σ = (Dmax − Dmin)/"
+            "(Dmax + Dmin), Δ/D̄ = (Dmax − Dmin)/D_mean. The U of D min, D max, ovality and "
+            "RONt includes the noise bias of the extremes (not corrected).</p><h2>Scan</h2>"
+            + _table(["quantity", "value"], _summary_rows(data)).replace(
+                "<table>", "<table class='kv' id='scan'>", 1)
+            + "<h2>Lumps and neck-downs</h2><div class='wide'>" + _events_html(data) + "</div>"
+            + "<h2>Sections</h2><div class='wide'>" + _table(head, body) + "</div>"
+            + _warnings_html(data["sections"])
+            + "<h2>Gaps (no valid point)</h2>" + _gaps_html(data["sections"])
+            + "<h2>Figures</h2>" + _figures_html(figs) + "</body></html>")
+
+
+_STYLE = ("body{font-family:sans-serif;margin:1em;font-size:13px;max-width:100%}"
+          "table{border-collapse:collapse;margin:.5em 0 1.5em}td,th{border:1px solid #bbb;"
+          "padding:2px 6px;text-align:right;overflow-wrap:anywhere}th{background:#eee}"
+          "table.kv{max-width:100%}table.kv td:first-child{text-align:left;overflow-wrap:normal;"
+          "min-width:9em}"
+          "table.kv td:last-child{text-align:left}"
+          "div.wide{max-width:100%;overflow-x:auto}"
+          ".verdict{font-size:28px;font-weight:bold;padding:.4em .6em;margin:.3em 0 .8em;"
+          "overflow-wrap:anywhere}.pass{background:#1b7f2a;color:#fff}"
+          ".fail{background:#b3141b;color:#fff}.none{background:#ddd;color:#000}"
+          "figure{display:inline-block;margin:.5em;max-width:100%}img{max-width:100%}"
+          "h1{font-size:18px;overflow-wrap:anywhere}code{white-space:pre-wrap}")
+
+
+def _about_rows(data: dict) -> list[tuple[str, str]]:
+    """The report's "about" table as (label, HTML) rows: tool, date, command, calibration,
+    filter and the extremes' note."""
     st = data["settings"]
     tool = data.get("tool") or {}
-    about = [("tool", html.escape(f"{tool.get('name', 'lts360')} {tool.get('version', '')}")),
-             ("date (UTC)", html.escape(str(data.get("date_utc") or "—"))),
-             ("command", f"<code>{html.escape(str(data.get('command') or '—'))}</code>"),
-             ("calibration", html.escape(str(data.get("calibration") or "not given"))),
-             ("filter", html.escape(st.get("filter", "—"))),
-             ("extremes", html.escape(st.get("extremes", "—")))]
+    return [("tool", html.escape(f"{tool.get('name', 'lts360')} {tool.get('version', '')}")),
+            ("date (UTC)", html.escape(str(data.get("date_utc") or "—"))),
+            ("command", f"<code>{html.escape(str(data.get('command') or '—'))}</code>"),
+            ("calibration", html.escape(str(data.get("calibration") or "not given"))),
+            ("filter", html.escape(st.get("filter", "—"))),
+            ("extremes", html.escape(st.get("extremes", "—")))]
+
+
+def _summary_rows(data: dict) -> list[tuple[str, object]]:
+    """The scan's summary table as (label, HTML) rows: sections, calibration u, the size and
+    ovality limits, the LS diameter and its trend, the axis, the nominal, the truth and the
+    verdict, each where the data holds it."""
+    scan = data["scan"]
     summary = [("sections", data["n_sections"]),
                ("calibration uncertainty",
                 html.escape(data["settings"]["calibration_uncertainty"]))]
     tol = data.get("tolerances")
     if tol:
-        if tol["diameter_mm"]:
-            d = tol["diameter_mm"]
-            summary.append(("diameter tolerance (mm)", f"{d['nominal_mm']:g} ± {d['tol_mm']:g}"
-                            f" (D min ≥ {d['lower_mm']:g}, D max ≤ {d['upper_mm']:g})"))
-        if tol["ovality_max_mm"] is not None:
-            summary.append(("ovality limit (mm)", f"≤ {tol['ovality_max_mm']:g}"))
+        summary += _tolerance_rows(tol)
     tr = scan["trends"]["d_ls_mm"]
     summary.append(("mean LS diameter (mm)", _fmt(tr["mean"], nd=5)))
     if tr["slope_per_mm"] is not None:
         summary.append(("LS diameter trend (µm/mm)", _fmt(1e3 * tr["slope_per_mm"], nd=3)))
     if "axis" in scan:
-        a = scan["axis"]
-        tilt = (html.escape(a["note"]) if a.get("note") else
-                f"{a['tilt_deg']:.4f} ± {a['U_tilt_deg']:.4f}" if "U_tilt_deg" in a
-                else _fmt(a["tilt_deg"], nd=4))
-        spec = scan["diameter_spectrum"]
-        wl = (html.escape(spec["note"]) if spec.get("note") else
-              _fmt(spec["dominant_wavelength_mm"], nd=2))
-        summary += [("axis tilt (deg)", tilt),
-                    ("straightness of the centres (mm)", _fmt(a["straightness_mm"])),
-                    ("cylindricity CYLt about the centres' axis (mm)",
-                     _fmt(scan["cylindricity"]["cylt_mm"])),
-                    ("dominant wavelength of D along z (mm)", wl)]
+        summary += _axis_rows(scan)
     if data["nominal"]:
         n = data["nominal"]
         summary.append(("nominal", html.escape(n["source"])))
@@ -350,95 +381,133 @@ def _html(data: dict, figs: dict[str, bytes]) -> str:
     if data.get("verdict") is not None:
         v = data["verdict"]
         summary.append(("verdict", "<b>PASS</b>" if v["pass"] else "<b>FAIL</b>"))
+    return summary
+
+
+def _tolerance_rows(tol: dict) -> list[tuple[str, str]]:
+    """Summary rows of the data's ``"tolerances"``: the diameter tolerance and the ovality
+    limit, each where given."""
+    rows = []
+    if tol["diameter_mm"]:
+        d = tol["diameter_mm"]
+        rows.append(("diameter tolerance (mm)", f"{d['nominal_mm']:g} ± {d['tol_mm']:g}"
+                     f" (D min ≥ {d['lower_mm']:g}, D max ≤ {d['upper_mm']:g})"))
+    if tol["ovality_max_mm"] is not None:
+        rows.append(("ovality limit (mm)", f"≤ {tol['ovality_max_mm']:g}"))
+    return rows
+
+
+def _axis_rows(scan: dict) -> list[tuple[str, str]]:
+    """Summary rows of a scan with an axis: its tilt (or why it is too short to tell),
+    straightness, cylindricity and the dominant wavelength of the diameter along z."""
+    a = scan["axis"]
+    tilt = (html.escape(a["note"]) if a.get("note") else
+            f"{a['tilt_deg']:.4f} ± {a['U_tilt_deg']:.4f}" if "U_tilt_deg" in a
+            else _fmt(a["tilt_deg"], nd=4))
+    spec = scan["diameter_spectrum"]
+    wl = (html.escape(spec["note"]) if spec.get("note") else
+          _fmt(spec["dominant_wavelength_mm"], nd=2))
+    return [("axis tilt (deg)", tilt),
+            ("straightness of the centres (mm)", _fmt(a["straightness_mm"])),
+            ("cylindricity CYLt about the centres' axis (mm)",
+             _fmt(scan["cylindricity"]["cylt_mm"])),
+            ("dominant wavelength of D along z (mm)", wl)]
+
+
+def _section_table(sections: list[dict]) -> tuple[list[str], list[list]]:
+    """The sections table's header and rows (one per section); the nominal, tolerance and
+    truth columns only where some section has them."""
+    has_nom = any("nominal" in s for s in sections)
+    has_checks = any(s.get("checks") for s in sections)
+    has_truth = any(s.get("truth") for s in sections)
     head = ["#", "z (mm)", "cov. (°)", "D LS (mm)", "D min (mm)", "D max (mm)",
             "ovality (mm)", "ovality Δ/Σ (%)", "ovality Δ/D̄ (%)"] + \
         [f"RONt {r} (µm)" for r in REFERENCES] + ["A₃ (µm)"]
-    has_nom = any("nominal" in s for s in data["sections"])
-    has_truth = any(s.get("truth") for s in data["sections"])
     if has_nom:
         head += ["dev. min (µm)", "dev. max (µm)", "result"]
-    has_checks = any(s.get("checks") for s in data["sections"])
     if has_checks:
         head += ["tolerances"]
     if has_truth:
         head += ["true D LS", "true ovality", "true RONt MZ (µm)", "true A₃ (µm)"]
-    body = []
-    for s in data["sections"]:
-        r = [s["index"], f"{s['z_mm']:.2f}", f"{s['coverage_deg']:.1f}", _fmt(s["d_ls_mm"]),
-             _fmt(s["d_min_mm"]), _fmt(s["d_max_mm"]), _fmt(s["ovality_mm"]),
-             _fmt(s["ovality_over_sum_pct"], nd=3), _fmt(s["ovality_over_mean_pct"], nd=3)]
-        r += [_fmt(s["ront_mm"][ref], 1e3, 1) for ref in REFERENCES]
-        r += [_fmt(s["harmonics"]["a3_mm"], 1e3, 1)]
-        if has_nom:
-            n = s.get("nominal", {})
-            r += [_fmt(n.get("deviation_min_mm"), 1e3, 1), _fmt(n.get("deviation_max_mm"), 1e3, 1),
-                  ("pass" if n.get("pass") else "fail") + f" ({n['conformance_iso14253']})"
-                  if "pass" in n else "—"]
-        if has_checks:
-            r += ["; ".join(f"{k}: {'pass' if c['pass'] else 'FAIL'} "
-                            f"({c['conformance_iso14253']})"
-                            for k, c in s.get("checks", {}).items()) or "—"]
-        if has_truth:
-            t = s.get("truth") or {}
-            r += [_fmt(t.get("d_ls_mm")), _fmt(t.get("ovality_mm")),
-                  _fmt(None if not t else 1e3 * t["ront_mm"]["MZCI"], nd=1),
-                  _fmt(None if not t else 1e3 * t["a3_mm"], nd=1)]
-        body.append(r)
-    def _ev_rows(evs):
-        return [[e["kind"], f"{e['z_start_mm']:.2f}", f"{e['z_end_mm']:.2f}",
-                 f"{e['length_mm']:.2f}", f"{e['z_extreme_mm']:.2f}",
-                 f"{1e3 * e['deviation_mm']:+.1f}",
-                 "—" if e.get("U_k2_mm") is None else f"{1e3 * e['U_k2_mm']:.1f}",
-                 "—" if e.get("confidence") is None else f"{100 * e['confidence']:.0f} %"]
-                for e in evs]
+    body = [_section_cells(s, has_nom=has_nom, has_checks=has_checks, has_truth=has_truth)
+            for s in sections]
+    return head, body
 
-    ev_head = ["kind", "z start (mm)", "z end (mm)", "length (mm)", "z extreme (mm)",
+
+def _section_cells(s: dict, *, has_nom: bool, has_checks: bool, has_truth: bool) -> list:
+    """One section's row of the sections table (cells as HTML), with the nominal, tolerance
+    and truth columns where asked for."""
+    r = [s["index"], f"{s['z_mm']:.2f}", f"{s['coverage_deg']:.1f}", _fmt(s["d_ls_mm"]),
+         _fmt(s["d_min_mm"]), _fmt(s["d_max_mm"]), _fmt(s["ovality_mm"]),
+         _fmt(s["ovality_over_sum_pct"], nd=3), _fmt(s["ovality_over_mean_pct"], nd=3)]
+    r += [_fmt(s["ront_mm"][ref], 1e3, 1) for ref in REFERENCES]
+    r += [_fmt(s["harmonics"]["a3_mm"], 1e3, 1)]
+    if has_nom:
+        n = s.get("nominal", {})
+        r += [_fmt(n.get("deviation_min_mm"), 1e3, 1), _fmt(n.get("deviation_max_mm"), 1e3, 1),
+              ("pass" if n.get("pass") else "fail") + f" ({n['conformance_iso14253']})"
+              if "pass" in n else "—"]
+    if has_checks:
+        r += ["; ".join(f"{k}: {'pass' if c['pass'] else 'FAIL'} "
+                        f"({c['conformance_iso14253']})"
+                        for k, c in s.get("checks", {}).items()) or "—"]
+    if has_truth:
+        t = s.get("truth") or {}
+        r += [_fmt(t.get("d_ls_mm")), _fmt(t.get("ovality_mm")),
+              _fmt(None if not t else 1e3 * t["ront_mm"]["MZCI"], nd=1),
+              _fmt(None if not t else 1e3 * t["a3_mm"], nd=1)]
+    return r
+
+
+_EVENT_HEAD = ["kind", "z start (mm)", "z end (mm)", "length (mm)", "z extreme (mm)",
                "deviation (µm)", "U(k = 2) (µm)", "P(beyond threshold)"]
+
+
+def _event_rows(evs: list[dict]) -> list[list[str]]:
+    """Rows of an events table, one per lump or neck-down (lengths in mm, deviations in µm)."""
+    return [[e["kind"], f"{e['z_start_mm']:.2f}", f"{e['z_end_mm']:.2f}",
+             f"{e['length_mm']:.2f}", f"{e['z_extreme_mm']:.2f}",
+             f"{1e3 * e['deviation_mm']:+.1f}",
+             "—" if e.get("U_k2_mm") is None else f"{1e3 * e['U_k2_mm']:.1f}",
+             "—" if e.get("confidence") is None else f"{100 * e['confidence']:.0f} %"]
+            for e in evs]
+
+
+def _events_html(data: dict) -> str:
+    """The lumps and neck-downs as HTML: the significant ones' table (or that there is
+    none), then those beyond the threshold but within their own U."""
+    scan = data["scan"]
     thr = f"{1e3 * data['settings']['lump_threshold_mm']:.0f} µm"
-    events = (_table(ev_head, _ev_rows(scan["events"])) if scan["events"]
+    events = (_table(_EVENT_HEAD, _event_rows(scan["events"])) if scan["events"]
               else f"<p>none significant beyond the threshold of {thr}</p>")
     if scan.get("events_not_significant"):
         events += (f"<p>Beyond {thr} but within their own U (not significant, not "
                    "reported as events):</p>"
-                   + _table(ev_head, _ev_rows(scan["events_not_significant"])))
+                   + _table(_EVENT_HEAD, _event_rows(scan["events_not_significant"])))
+    return events
+
+
+def _warnings_html(sections: list[dict]) -> str:
+    """The sections' warnings as an HTML list under its heading; empty where there is none."""
+    warn = [f"<li>section {s['index']} (z = {s['z_mm']:.2f} mm): {html.escape(w)}</li>"
+            for s in sections for w in s.get("warnings", [])]
+    return f"<h2>Warnings</h2><ul>{''.join(warn)}</ul>" if warn else ""
+
+
+def _gaps_html(sections: list[dict]) -> str:
+    """The sections' gaps (no valid point) as an HTML table, or ``<p>none</p>``."""
     gaps = [[s["index"], f"{g['start_deg']:.1f}", f"{g['end_deg']:.1f}", f"{g['width_deg']:.1f}",
              html.escape(", ".join(f"{k}: {v}" for k, v in g["flags"].items()))]
-            for s in data["sections"] for g in s["gaps"]]
-    warn = [f"<li>section {s['index']} (z = {s['z_mm']:.2f} mm): {html.escape(w)}</li>"
-            for s in data["sections"] for w in s.get("warnings", [])]
-    warn = f"<h2>Warnings</h2><ul>{''.join(warn)}</ul>" if warn else ""
-    imgs = "".join(f'<figure><img alt="{html.escape(n)}" src="data:image/png;base64,'
+            for s in sections for g in s["gaps"]]
+    return (_table(["section", "from (°)", "to (°)", "width (°)", "flags"], gaps) if gaps
+            else "<p>none</p>")
+
+
+def _figures_html(figs: dict[str, bytes]) -> str:
+    """The figures (name → PNG bytes) as HTML figures with the PNGs inlined as base64."""
+    return "".join(f'<figure><img alt="{html.escape(n)}" src="data:image/png;base64,'
                    f'{base64.b64encode(b).decode("ascii")}"><figcaption>{html.escape(n)}'
                    "</figcaption></figure>" for n, b in figs.items())
-    style = ("body{font-family:sans-serif;margin:1em;font-size:13px;max-width:100%}"
-             "table{border-collapse:collapse;margin:.5em 0 1.5em}td,th{border:1px solid #bbb;"
-             "padding:2px 6px;text-align:right;overflow-wrap:anywhere}th{background:#eee}"
-             "table.kv{max-width:100%}table.kv td:first-child{text-align:left;overflow-wrap:normal;"
-             "min-width:9em}"
-             "table.kv td:last-child{text-align:left}"
-             "div.wide{max-width:100%;overflow-x:auto}"
-             ".verdict{font-size:28px;font-weight:bold;padding:.4em .6em;margin:.3em 0 .8em;"
-             "overflow-wrap:anywhere}.pass{background:#1b7f2a;color:#fff}"
-             ".fail{background:#b3141b;color:#fff}.none{background:#ddd;color:#000}"
-             "figure{display:inline-block;margin:.5em;max-width:100%}img{max-width:100%}"
-             "h1{font-size:18px;overflow-wrap:anywhere}code{white-space:pre-wrap}")
-    return ("<!DOCTYPE html><html><head><meta charset='utf-8'>"
-            "<meta name='viewport' content='width=device-width'><title>lts360 inspection</title>"
-            f"<style>{style}</style></head><body>" + _banner(data)
-            + f"<h1>Inspection of {html.escape(data['source'])}</h1>"
-            + _table(["", ""], about).replace("<table>", "<table class='kv'>", 1)
-            .replace("<thead><tr><th></th><th></th></tr></thead>", "", 1)
-            + "<p>Values ± U(k = 2); lengths in mm unless stated. Roundness RONt against the"
-            " ISO 12181 reference circles LSCI, MZCI, MCCI, MICI. Ovality Δ/Σ = (Dmax − Dmin)/"
-            "(Dmax + Dmin), Δ/D̄ = (Dmax − Dmin)/D_mean. The U of D min, D max, ovality and "
-            "RONt includes the noise bias of the extremes (not corrected).</p><h2>Scan</h2>"
-            + _table(["quantity", "value"], summary).replace("<table>", "<table class='kv' "
-                                                             "id='scan'>", 1)
-            + "<h2>Lumps and neck-downs</h2><div class='wide'>" + events + "</div>"
-            + "<h2>Sections</h2><div class='wide'>" + _table(head, body) + "</div>" + warn
-            + "<h2>Gaps (no valid point)</h2>"
-            + (_table(["section", "from (°)", "to (°)", "width (°)", "flags"], gaps) if gaps
-               else "<p>none</p>") + "<h2>Figures</h2>" + imgs + "</body></html>")
 
 
 def write_report(ins: Inspection, out) -> Path:

@@ -5,7 +5,9 @@ truth, gathered into one JSON-ready result (units in the names; a quantity with 
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
+from importlib.metadata import PackageNotFoundError, version
 
 import numpy as np
 
@@ -181,6 +183,49 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
     NoValidPoints
         No section has :data:`MIN_POINTS` valid points.
     """
+    _check_arguments(u_radial_mm=u_radial_mm, filter_upr=filter_upr, band=band,
+                     nominal=nominal, use_filter=use_filter)
+    ok = _valid_mask(cloud, source)
+    form_upr = _form_upr(cloud, ok)
+    filter_upr, filter_note = _filter_setting(use_filter, filter_upr, form_upr)
+    sections, skipped, xy_list, view_list, times = _analyse_sections(
+        cloud, ok, bin_deg=bin_deg, gap_deg=gap_deg, filter_upr=filter_upr)
+    u_cal, cal_note = _calibration_u(calibration, xy_list, view_list, n_draws=n_draws,
+                                     seed=seed)
+    exs = _extreme_noises(sections, bin_deg=bin_deg, gap_deg=gap_deg, filter_upr=filter_upr,
+                          form_upr=form_upr, extreme_draws=extreme_draws, seed=seed)
+    rows = _section_rows(sections, exs, u_cal, u_radial_mm, times)
+    inspection = Inspection(data={}, sections=sections, band=band)
+    nom_out = None
+    if nominal is not None:
+        nom_out = _against_nominal(inspection, rows, nominal, band, u_cal, u_radial_mm)
+    tol_out = _tolerances(rows, diameter_tol, ovality_max_mm)
+    verdict = _verdict(rows, nom_out, tol_out)
+    truth_out = None
+    if truth is not None:
+        truth_out, trows = _truth_rows(truth, sections, filter_upr)
+        for row, t in zip(rows, trows):
+            row["truth"] = t
+    settings = _settings(bin_deg=bin_deg, gap_deg=gap_deg, filter_upr=filter_upr,
+                         filter_note=filter_note, extreme_draws=extreme_draws,
+                         lump_threshold_mm=lump_threshold_mm, cal_note=cal_note,
+                         u_radial_mm=u_radial_mm)
+    inspection.data = {
+        "tool": {"name": "lts360", "version": _tool_version()},
+        "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "source": source, "n_sections": len(sections), "sections_skipped": skipped,
+        "units": "lengths in mm, angles in deg; {value, u, U_k2}: U_k2 = 2u",
+        "settings": settings,
+        "sections": rows, "scan": _scan(sections, rows, lump_threshold_mm),
+        "nominal": nom_out, "tolerances": tol_out, "verdict": verdict, "truth": truth_out}
+    return inspection
+
+
+def _check_arguments(*, u_radial_mm: float, filter_upr: float | None,
+                     band: ToleranceBand | None, nominal: Nominal | None,
+                     use_filter: bool) -> None:
+    """Refuse contradictory or out-of-range options (:class:`ValueError`, worded for the
+    command line); returns nothing."""
     if not (u_radial_mm >= 0 and np.isfinite(u_radial_mm)):
         raise ValueError(f"--u-radial-mm: must be >= 0, got {u_radial_mm}")
     lo, hi = FILTER_UPR_RANGE
@@ -190,25 +235,51 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         raise ValueError("--tolerance-mm/--upper-mm/--lower-mm need --nominal")
     if not use_filter and filter_upr is not None:
         raise ValueError("--filter-upr: give it or --filter none, not both")
+
+
+def _valid_mask(cloud: Cloud, source: str) -> np.ndarray:
+    """The cloud's valid points (finite, quality FOUND or SATURATED) as a boolean mask over
+    its samples; raises :class:`NoValidPoints` where there is none."""
     ok = valid_mask(cloud.points_mm, cloud.quality)
     if not ok.any():
         raise NoValidPoints(f"the cloud {source or ''} has no valid point ({len(cloud)} samples, "
                             "none finite with quality FOUND or SATURATED)".replace("  ", " "))
-    # the default filter from the scan's median LS diameter (of the points, unfiltered)
-    form_upr = default_upr(float(np.median([
-        least_squares_circle(cloud.points_mm[(cloud.section == k) & ok, :2]).diameter_mm
-        for k in np.unique(cloud.section)
-        if ((cloud.section == k) & ok).sum() >= MIN_POINTS] or [np.nan]))) \
-        if any(((cloud.section == k) & ok).sum() >= MIN_POINTS
-               for k in np.unique(cloud.section)) else None
+    return ok
+
+
+def _form_upr(cloud: Cloud, ok: np.ndarray) -> float | None:
+    """The standard's default filter cut-off (UPR) for the scan's median LS diameter, from
+    the unfiltered valid points of every section with :data:`MIN_POINTS` of them; ``None``
+    where no section has that many."""
+    diameters = []
+    for k in np.unique(cloud.section):
+        m = (cloud.section == k) & ok
+        if m.sum() >= MIN_POINTS:
+            diameters.append(least_squares_circle(cloud.points_mm[m, :2]).diameter_mm)
+    return default_upr(float(np.median(diameters))) if diameters else None
+
+
+def _filter_setting(use_filter: bool, filter_upr: float | None,
+                    form_upr: float | None) -> tuple[float | None, str]:
+    """The filter cut-off to apply (``None``: no filter) and its note for the report, from
+    the options and the scan's default ``form_upr``."""
     if use_filter and filter_upr is None:
-        filter_upr = form_upr
-        filter_note = (f"ISO 12181-2 Gaussian, {filter_upr:g} UPR (the standard's default for "
-                       "the scan's diameter)")
-    elif use_filter:
-        filter_note = f"ISO 12181-2 Gaussian, {filter_upr:g} UPR (--filter-upr)"
-    else:
-        filter_upr, filter_note = None, "none (--filter none)"
+        return form_upr, (f"ISO 12181-2 Gaussian, {form_upr:g} UPR (the standard's default "
+                          "for the scan's diameter)")
+    if use_filter:
+        return filter_upr, f"ISO 12181-2 Gaussian, {filter_upr:g} UPR (--filter-upr)"
+    return None, "none (--filter none)"
+
+
+def _analyse_sections(cloud: Cloud, ok: np.ndarray, *, bin_deg: float, gap_deg: float,
+                      filter_upr: float | None) -> tuple[list, list, list, list, list]:
+    """Analyse each section of the cloud with :data:`MIN_POINTS` valid points.
+
+    Returns the :class:`SectionResult` list, the skipped sections (``{index, z_mm,
+    n_valid}``), and per analysed section its valid xy (mm), their views' names and its
+    exposure time (:func:`_section_time`). Raises :class:`NoValidPoints` where none is
+    analysed.
+    """
     sections, skipped, xy_list, view_list, times = [], [], [], [], []
     for k in np.unique(cloud.section):
         m = cloud.section == k
@@ -229,13 +300,28 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
     if not sections:
         raise NoValidPoints(f"no section has {MIN_POINTS} valid points: "
                             + ", ".join(f"section {s['index']}: {s['n_valid']}" for s in skipped))
-    cal_note = "not given"
-    u_cal = None
-    if calibration is not None:
-        u_cal = calibration_u(xy_list, view_list, calibration, n_draws=n_draws, seed=seed)
-        cal_note = (f"Monte Carlo over {n_draws} calibration draws (seed {seed})"
-                    if u_cal is not None else "the calibration carries no covariance: 0")
-    rows, exs = [], []
+    return sections, skipped, xy_list, view_list, times
+
+
+def _calibration_u(calibration, xy_list: list, view_list: list, *, n_draws: int,
+                   seed: int) -> tuple[list | None, str]:
+    """Each section's calibration uncertainties (a dict per section; ``None`` without a
+    calibration or its covariance) and how they were found, as the report words it."""
+    if calibration is None:
+        return None, "not given"
+    u_cal = calibration_u(xy_list, view_list, calibration, n_draws=n_draws, seed=seed)
+    return u_cal, (f"Monte Carlo over {n_draws} calibration draws (seed {seed})"
+                   if u_cal is not None else "the calibration carries no covariance: 0")
+
+
+def _extreme_noises(sections: list[SectionResult], *, bin_deg: float, gap_deg: float,
+                    filter_upr: float | None, form_upr: float | None, extreme_draws: int,
+                    seed: int) -> list[tuple]:
+    """Per section ``(ExtremeNoise, scatter u table, correlation length in bins)``: the noise
+    of its extremes from a Monte Carlo of its own unfiltered profile's noise. The MCCI and
+    MICI are fitted on at most :data:`CIRCLE_SECTIONS` sections spread over the scan; every
+    other section takes theirs from the nearest one fitted."""
+    exs = []
     picks = np.unique(np.round(np.linspace(0, len(sections) - 1,
                                            min(CIRCLE_SECTIONS, len(sections)))).astype(int))
     for i, s in enumerate(sections):
@@ -256,6 +342,14 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         j = int(picks[np.argmin(np.abs(picks - i))])
         for k in ("ront_MCCI_mm", "ront_MICI_mm"):
             ex.bias_mm[k], ex.u_mm[k] = exs[j][0].bias_mm[k], exs[j][0].u_mm[k]
+    return exs
+
+
+def _section_rows(sections: list[SectionResult], exs: list[tuple], u_cal: list | None,
+                  u_radial_mm: float, times: list) -> list[dict]:
+    """The JSON rows of the sections (:func:`_section_dict`), each with its extremes' noise,
+    its correlation length and, for a moving object, its time."""
+    rows = []
     for i, (s, (ex, us, tau)) in enumerate(zip(sections, exs)):
         row = _section_dict(s, us, None if u_cal is None else u_cal[i], u_radial_mm, ex)
         row["extreme_noise"] = {"s_bin_mm": ex.s_bin_mm, "rho": ex.rho, "n_draws": ex.n_draws,
@@ -264,89 +358,110 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         if times[i] is not None:
             row["time_s"], row["time_span_s"] = times[i]
         rows.append(row)
+    return rows
 
-    inspection = Inspection(data={}, sections=sections, band=band)
-    nom_out = None
-    if nominal is not None:
-        all_pass = True
-        for s, row in zip(sections, rows):
-            ring = place_nominal(nominal.contour(s.z_mm), s.ls.centre_mm)
-            dev = deviations(s.xy_mm, ring)
-            inspection.deviations_mm.append((ring, dev))
-            u_dev = combine(scatter_u(s.scatter_mm, 1, 1)["deviation_mm"],
-                            None if u_cal is None else u_cal[sections.index(s)]["d_ls_mm"] / 2,
-                            u_radial_mm or None)
-            nd = {"deviation_min_mm": _q(dev.min(), u_dev["u"]),
-                  "deviation_max_mm": _q(dev.max(), u_dev["u"]),
-                  "deviation_rms_mm": float(np.sqrt(np.mean(dev**2)))}
-            if band is not None:
-                outside = (dev > band.upper_mm) | (dev < band.lower_mm)
-                U = u_dev["U_k2"]
-                sure_in = (dev.max() <= band.upper_mm - U) and (dev.min() >= band.lower_mm + U)
-                sure_out = (dev.max() > band.upper_mm + U) or (dev.min() < band.lower_mm - U)
-                nd.update({"n_outside": int(outside.sum()), "pass": bool(not outside.any()),
-                           "conformance_iso14253": "conforms" if sure_in else
-                           ("does not conform" if sure_out else "inconclusive")})
-                all_pass &= nd["pass"]
-            row["nominal"] = nd
-        nom_out = {"source": nominal.source, "alignment": "LS centre onto LS centre",
-                   "round": nominal.is_round}
+
+def _against_nominal(inspection: Inspection, rows: list[dict], nominal: Nominal,
+                     band: ToleranceBand | None, u_cal: list | None,
+                     u_radial_mm: float) -> dict:
+    """Compare each section with the nominal placed on its LS centre: appends ``(ring,
+    deviations)`` to ``inspection.deviations_mm``, sets each row's ``"nominal"``
+    (:func:`_nominal_row`) and returns the scan's ``"nominal"`` entry (with ``band``, its
+    limits and pass)."""
+    all_pass = True
+    for i, (s, row) in enumerate(zip(inspection.sections, rows)):
+        ring = place_nominal(nominal.contour(s.z_mm), s.ls.centre_mm)
+        dev = deviations(s.xy_mm, ring)
+        inspection.deviations_mm.append((ring, dev))
+        u_dev = combine(scatter_u(s.scatter_mm, 1, 1)["deviation_mm"],
+                        None if u_cal is None else u_cal[i]["d_ls_mm"] / 2,
+                        u_radial_mm or None)
+        row["nominal"] = _nominal_row(dev, u_dev, band)
         if band is not None:
-            nom_out.update({"upper_mm": band.upper_mm, "lower_mm": band.lower_mm,
-                            "pass": bool(all_pass)})
-    tol_out = None
-    if diameter_tol is not None or ovality_max_mm is not None:
-        from lts360.inspect.tolerances import section_checks
+            all_pass &= row["nominal"]["pass"]
+    nom_out = {"source": nominal.source, "alignment": "LS centre onto LS centre",
+               "round": nominal.is_round}
+    if band is not None:
+        nom_out.update({"upper_mm": band.upper_mm, "lower_mm": band.lower_mm,
+                        "pass": bool(all_pass)})
+    return nom_out
 
-        for row in rows:
-            row["checks"] = section_checks(row, diameter=diameter_tol,
-                                           ovality_max_mm=ovality_max_mm)
-        tol_out = {"diameter_mm": None if diameter_tol is None else
-                   {"nominal_mm": diameter_tol.nominal_mm, "tol_mm": diameter_tol.tol_mm,
-                    "lower_mm": diameter_tol.lower_mm, "upper_mm": diameter_tol.upper_mm},
-                   "ovality_max_mm": ovality_max_mm,
-                   "rule": "pass: the measured values within the limits; conformance by "
-                           "ISO 14253-1 with U(k = 2)"}
-    verdict = None
-    if tol_out is not None or (nom_out is not None and "pass" in nom_out):
-        failed = []
-        if nom_out is not None and "pass" in nom_out and not nom_out["pass"]:
-            failed.append("profile zone")
-        for row in rows:
-            for name, c in row.get("checks", {}).items():
-                if not c["pass"]:
-                    failed.append(f"{name} at z = {row['z_mm']:.2f} mm")
-        verdict = {"pass": not failed, "failed": failed}
-    truth_out = None
-    if truth is not None:
-        truth_out, trows = _truth_rows(truth, sections, filter_upr)
-        for row, t in zip(rows, trows):
-            row["truth"] = t
-    import time
-    from importlib.metadata import PackageNotFoundError, version
 
+def _nominal_row(dev: np.ndarray, u_dev: dict, band: ToleranceBand | None) -> dict:
+    """One section's ``"nominal"`` entry from its deviations (mm) and their ``u_dev``
+    (``{u, U_k2}``): the extreme and RMS deviations and, with ``band``, the points outside,
+    pass and the ISO 14253-1 conformance."""
+    nd = {"deviation_min_mm": _q(dev.min(), u_dev["u"]),
+          "deviation_max_mm": _q(dev.max(), u_dev["u"]),
+          "deviation_rms_mm": float(np.sqrt(np.mean(dev**2)))}
+    if band is not None:
+        outside = (dev > band.upper_mm) | (dev < band.lower_mm)
+        U = u_dev["U_k2"]
+        sure_in = (dev.max() <= band.upper_mm - U) and (dev.min() >= band.lower_mm + U)
+        sure_out = (dev.max() > band.upper_mm + U) or (dev.min() < band.lower_mm - U)
+        nd.update({"n_outside": int(outside.sum()), "pass": bool(not outside.any()),
+                   "conformance_iso14253": "conforms" if sure_in else
+                   ("does not conform" if sure_out else "inconclusive")})
+    return nd
+
+
+def _tolerances(rows: list[dict], diameter_tol, ovality_max_mm: float | None) -> dict | None:
+    """With a size or ovality limit: sets each row's ``"checks"``
+    (:func:`lts360.inspect.tolerances.section_checks`) and returns the scan's
+    ``"tolerances"`` entry; ``None`` without either."""
+    if diameter_tol is None and ovality_max_mm is None:
+        return None
+    from lts360.inspect.tolerances import section_checks
+
+    for row in rows:
+        row["checks"] = section_checks(row, diameter=diameter_tol,
+                                       ovality_max_mm=ovality_max_mm)
+    return {"diameter_mm": None if diameter_tol is None else
+            {"nominal_mm": diameter_tol.nominal_mm, "tol_mm": diameter_tol.tol_mm,
+             "lower_mm": diameter_tol.lower_mm, "upper_mm": diameter_tol.upper_mm},
+            "ovality_max_mm": ovality_max_mm,
+            "rule": "pass: the measured values within the limits; conformance by "
+                    "ISO 14253-1 with U(k = 2)"}
+
+
+def _verdict(rows: list[dict], nom_out: dict | None, tol_out: dict | None) -> dict | None:
+    """The scan's PASS/FAIL (``{pass, failed}``: the profile zone and each failed check with
+    its z) where a tolerance was given; ``None`` where none was."""
+    if tol_out is None and (nom_out is None or "pass" not in nom_out):
+        return None
+    failed = []
+    if nom_out is not None and "pass" in nom_out and not nom_out["pass"]:
+        failed.append("profile zone")
+    for row in rows:
+        for name, c in row.get("checks", {}).items():
+            if not c["pass"]:
+                failed.append(f"{name} at z = {row['z_mm']:.2f} mm")
+    return {"pass": not failed, "failed": failed}
+
+
+def _tool_version() -> str:
+    """The installed lts360's version; ``"0+unknown"`` when run from a source tree."""
     try:
-        tool_version = version("lts360")
+        return version("lts360")
     except PackageNotFoundError:  # run from a source tree
-        tool_version = "0+unknown"
-    inspection.data = {
-        "tool": {"name": "lts360", "version": tool_version},
-        "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-        "source": source, "n_sections": len(sections), "sections_skipped": skipped,
-        "units": "lengths in mm, angles in deg; {value, u, U_k2}: U_k2 = 2u",
-        "settings": {"bin_deg": bin_deg, "gap_deg": gap_deg, "filter_upr": filter_upr,
-                     "filter": filter_note,
-                     "extremes": f"D min, D max, ovality, RONt: U(k = 2) = 2u + |bias|, the "
-                                 f"noise bias of the extremes from a Monte Carlo of "
-                                 f"{extreme_draws} draws of each section's own noise, not "
-                                 f"corrected",
-                     "lump_threshold_mm": lump_threshold_mm,
-                     "reference_circles": list(REFERENCES),
-                     "calibration_uncertainty": cal_note,
-                     "u_radial_mm": u_radial_mm},
-        "sections": rows, "scan": _scan(sections, rows, lump_threshold_mm),
-        "nominal": nom_out, "tolerances": tol_out, "verdict": verdict, "truth": truth_out}
-    return inspection
+        return "0+unknown"
+
+
+def _settings(*, bin_deg: float, gap_deg: float, filter_upr: float | None, filter_note: str,
+              extreme_draws: int, lump_threshold_mm: float, cal_note: str,
+              u_radial_mm: float) -> dict:
+    """The ``"settings"`` entry: the options the inspection ran with, and the notes on the
+    filter, the extremes' uncertainty and the calibration uncertainty."""
+    return {"bin_deg": bin_deg, "gap_deg": gap_deg, "filter_upr": filter_upr,
+            "filter": filter_note,
+            "extremes": f"D min, D max, ovality, RONt: U(k = 2) = 2u + |bias|, the "
+                        f"noise bias of the extremes from a Monte Carlo of "
+                        f"{extreme_draws} draws of each section's own noise, not "
+                        f"corrected",
+            "lump_threshold_mm": lump_threshold_mm,
+            "reference_circles": list(REFERENCES),
+            "calibration_uncertainty": cal_note,
+            "u_radial_mm": u_radial_mm}
 
 
 def _section_time(cloud: Cloud, valid: np.ndarray) -> tuple[float, float] | None:
