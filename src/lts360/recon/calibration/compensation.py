@@ -36,6 +36,29 @@ DEFAULT_REFERENCE_RADIUS_MM = 10.0
 DEFAULT_REFERENCE_HALF_WIDTH_MM = 1.0
 
 
+def _as_shots(result, empty_message: str) -> list:
+    """One measurement or a sequence of them, as a list; ``ValueError`` if there is none."""
+    results = list(result) if isinstance(result, (list, tuple)) else [result]
+    if not results:
+        raise ValueError(empty_message)
+    return results
+
+
+def _shot_views(results, *, reference: str, min_points: int, what: str):
+    """Each shot's raw view points (:func:`raw_view_points`) and the views they share.
+
+    Returns ``(shots, names, col)``: per shot, view name → (n, 2) points; the view names (the
+    first shot's order); each non-reference view's column among the translations.
+    ``ValueError`` (``what`` names the shots) when the shots do not have the same views.
+    """
+    shots = [raw_view_points(r, reference=reference, min_points=min_points) for r in results]
+    names = list(shots[0])
+    if any(set(s) != set(names) for s in shots[1:]):
+        raise ValueError(f"{what} have different views: {[sorted(s) for s in shots]}")
+    col = {n: i for i, n in enumerate(n for n in names if n != reference)}
+    return shots, names, col
+
+
 def joint_view_offsets(result, *, reference: str = "direct", min_points: int = 10
                        ) -> dict[str, np.ndarray]:
     """Absolute (x, y) offsets (mm, measurement frame) of each non-reference view.
@@ -59,16 +82,10 @@ def joint_view_offsets(result, *, reference: str = "direct", min_points: int = 1
         No measurement, no reference view, a view with fewer than ``min_points`` valid
         points, or measurements that do not share their views.
     """
-    results = list(result) if isinstance(result, (list, tuple)) else [result]
-    if not results:
-        raise ValueError("joint_view_offsets: no measurement")
-    shots = [raw_view_points(r, reference=reference, min_points=min_points) for r in results]
-    names = list(shots[0])
-    if any(set(s) != set(names) for s in shots[1:]):
-        raise ValueError(f"joint_view_offsets: the measurements have different views: "
-                         f"{[sorted(s) for s in shots]}")
-    others = [n for n in names if n != reference]
-    col = {n: i for i, n in enumerate(others)}
+    results = _as_shots(result, "joint_view_offsets: no measurement")
+    shots, names, col = _shot_views(results, reference=reference, min_points=min_points,
+                                    what="joint_view_offsets: the measurements")
+    others = list(col)
     pts, shot, idx = [], [], []
     for k, s in enumerate(shots):
         for n in names:
@@ -197,10 +214,36 @@ def master_fit(result, diameters_mm, *, u_diameters_mm=None, reference: str = "d
         nominal diameter with different ``u``, masters less than :data:`MIN_MASTER_SPREAD_MM`
         apart, too few points in a view.
     """
-    results = list(result) if isinstance(result, (list, tuple)) else [result]
-    if not results:
-        raise ValueError("master_fit: no shot")
-    m = len(results)
+    results = _as_shots(result, "master_fit: no shot")
+    D, masters, group, u_master = _master_diameters(diameters_mm, u_diameters_mm, len(results))
+    fit_scale = len(masters) > 1
+    shots, names, col = _shot_views(results, reference=reference, min_points=min_points,
+                                    what="master_fit: the shots")
+    problem = _master_problem(shots, names, col, fit_scale)
+    R = 0.5 * D
+    sol, keep = _fit_dropping_outliers(problem, R, _master_start(problem, shots, R), min_points)
+    moves = _master_diameter_moves(problem, R, group, u_master, sol.x, keep)
+    out = _per_view_results(problem, names, sol.x, _fit_covariance(sol), moves, masters)
+    t = problem.unpack(sol.x)[1]
+    return MasterFit(offsets_mm={n: t[col[n]].copy() for n in col},
+                     radial_offset_mm=out["dr"], scale=out["s"], u_radial_offset_mm=out["u_dr"],
+                     u_scale=out["u_s"], u_radius_mm=out["u_r"],
+                     u_fit_radial_offset_mm=out["u_fit"],
+                     u_master_radial_offset_mm=out["u_master"],
+                     diameters_mm=tuple(float(v) for v in masters),
+                     u_diameters_mm=tuple(float(v) for v in u_master),
+                     shots_per_master=tuple(int(np.sum(group == g)) for g in range(len(masters))),
+                     rms_mm=float(np.sqrt(np.mean(sol.fun ** 2))), fitted_scale=fit_scale,
+                     n_points=int(keep.sum()), n_outliers=int((~keep).sum()))
+
+
+def _master_diameters(diameters_mm, u_diameters_mm, m: int):
+    """The ``m`` shots' master diameters and their ``u``, checked, and the masters.
+
+    Returns ``(D, masters, group, u_master)``: per shot its diameter; the distinct diameters
+    (ascending, to 1e-9 mm); per shot the index of its master; per master its ``u``.
+    ``ValueError`` as :func:`master_fit` says.
+    """
     D = np.broadcast_to(np.asarray(diameters_mm, float).ravel(), (m,)) \
         if np.size(diameters_mm) in (1, m) else None
     if D is None:
@@ -222,14 +265,63 @@ def master_fit(result, diameters_mm, *, u_diameters_mm=None, reference: str = "d
     if len(masters) > 1 and np.min(np.diff(masters)) < MIN_MASTER_SPREAD_MM:
         raise ValueError(f"masters: diameters {masters} mm are less than "
                          f"{MIN_MASTER_SPREAD_MM:g} mm apart: they set no scale")
-    fit_scale = len(masters) > 1
-    shots = [raw_view_points(r, reference=reference, min_points=min_points) for r in results]
-    names = list(shots[0])
-    if any(set(s) != set(names) for s in shots[1:]):
-        raise ValueError(f"master_fit: the shots have different views: "
-                         f"{[sorted(s) for s in shots]}")
-    others = [n for n in names if n != reference]
-    col = {n: i for i, n in enumerate(others)}
+    return D, masters, group, u_master
+
+
+@dataclass(frozen=True, eq=False)
+class _MasterProblem:
+    """The mastering least squares: every point's ray and the parameters' layout.
+
+    Per point: its raw radius ``r0`` and unit ray ``u0`` (from the measurement origin), its
+    shot, its translation's column ``tix`` (-1: the reference view) and its view ``vix``.
+    Parameters: per shot a centre (``2m``), per mirror view a translation (``2·no``), per view
+    a radial offset (``nv``) and, with ``fit_scale``, a scale − 1 (``nv``).
+    """
+
+    r0: np.ndarray
+    u0: np.ndarray
+    shot: np.ndarray
+    tix: np.ndarray
+    vix: np.ndarray
+    m: int
+    no: int
+    nv: int
+    fit_scale: bool
+
+    @property
+    def i_dr(self) -> int:
+        """Index of the first radial offset in the parameters."""
+        return 2 * self.m + 2 * self.no
+
+    def unpack(self, x):
+        """``(centres, translations, radial offsets, scales − 1)`` from the parameters."""
+        m, no, nv = self.m, self.no, self.nv
+        c = x[:2 * m].reshape(m, 2)
+        t = x[2 * m:2 * m + 2 * no].reshape(no, 2)
+        dr = x[2 * m + 2 * no:2 * m + 2 * no + nv]
+        ds = x[2 * m + 2 * no + nv:] if self.fit_scale else np.zeros(nv)
+        return c, t, dr, ds
+
+    def residual(self, R, sel=None):
+        """The residual function for shot radii ``R``: the corrected point's distance from its
+        shot's centre minus the radius (the points ``sel`` only, if given)."""
+        def residual(x):
+            c, t, dr, ds = self.unpack(x)
+            rr = (1.0 + ds[self.vix]) * self.r0 + dr[self.vix]
+            shift = np.where(self.tix[:, None] >= 0, t[np.maximum(self.tix, 0)], 0.0)
+            q = rr[:, None] * self.u0 + shift - c[self.shot]
+            res = np.hypot(*q.T) - R[self.shot]
+            return res if sel is None else res[sel]
+        return residual
+
+    def solve(self, R, x_start, keep):
+        """Levenberg–Marquardt on the points ``keep``, from ``x_start``."""
+        return least_squares(self.residual(R, keep), x_start, method="lm", xtol=1e-15,
+                             ftol=1e-15, gtol=1e-15)
+
+
+def _master_problem(shots, names, col, fit_scale: bool) -> _MasterProblem:
+    """Every shot's and view's points as rays, in shot then view order."""
     vcol = {n: i for i, n in enumerate(names)}
     r_l, u_l, shot_l, t_l, v_l = [], [], [], [], []
     for k, s in enumerate(shots):
@@ -241,70 +333,75 @@ def master_fit(result, diameters_mm, *, u_diameters_mm=None, reference: str = "d
             shot_l.append(np.full(len(p), k))
             t_l.append(np.full(len(p), col.get(n, -1)))
             v_l.append(np.full(len(p), vcol[n]))
-    r0, u0 = np.concatenate(r_l), np.concatenate(u_l)
-    shot, tix, vix = np.concatenate(shot_l), np.concatenate(t_l), np.concatenate(v_l)
-    nv, no = len(names), len(others)
+    return _MasterProblem(r0=np.concatenate(r_l), u0=np.concatenate(u_l),
+                          shot=np.concatenate(shot_l), tix=np.concatenate(t_l),
+                          vix=np.concatenate(v_l), m=len(shots), no=len(col), nv=len(names),
+                          fit_scale=fit_scale)
 
-    def unpack(x):
-        c = x[:2 * m].reshape(m, 2)
-        t = x[2 * m:2 * m + 2 * no].reshape(no, 2)
-        dr = x[2 * m + 2 * no:2 * m + 2 * no + nv]
-        ds = x[2 * m + 2 * no + nv:] if fit_scale else np.zeros(nv)
-        return c, t, dr, ds
 
-    keep = np.ones(r0.size, bool)
-
-    def make_residual(R, sel=None):
-        def residual(x):
-            c, t, dr, ds = unpack(x)
-            rr = (1.0 + ds[vix]) * r0 + dr[vix]
-            shift = np.where(tix[:, None] >= 0, t[np.maximum(tix, 0)], 0.0)
-            q = rr[:, None] * u0 + shift - c[shot]
-            res = np.hypot(*q.T) - R[shot]
-            return res if sel is None else res[sel]
-        return residual
-
-    R = 0.5 * D
+def _master_start(problem: _MasterProblem, shots, R) -> np.ndarray:
+    """Starting parameters: each shot's free circle's centre, no translation, one radial
+    offset for all views (the circles' mean radius error), no scale."""
+    no, nv = problem.no, problem.nv
     starts = [fit_circle(np.concatenate(list(s.values()))) for s in shots]
-    x0 = np.concatenate([np.concatenate([f.center_mm for f in starts]), np.zeros(2 * no),
-                         np.array([np.mean([R[k] - f.radius_mm for k, f in enumerate(starts)])]
-                                  * nv), np.zeros(nv if fit_scale else 0)])
+    return np.concatenate([np.concatenate([f.center_mm for f in starts]), np.zeros(2 * no),
+                           np.array([np.mean([R[k] - f.radius_mm for k, f in enumerate(starts)])]
+                                    * nv), np.zeros(nv if problem.fit_scale else 0)])
 
-    def solve(Rk, x_start):
-        return least_squares(make_residual(Rk, keep), x_start, method="lm", xtol=1e-15,
-                             ftol=1e-15, gtol=1e-15)
 
-    # Outliers (a stray peak in the reference's band) are dropped: beyond OUTLIER_K robust σ
-    # of the residuals, refitted until none is left (at most OUTLIER_ROUNDS times).
-    sol = solve(R, x0)
+def _fit_dropping_outliers(problem: _MasterProblem, R, x0, min_points: int):
+    """The fit, outliers dropped: returns the solution and the points kept.
+
+    Outliers (a stray peak in the reference's band) are dropped: beyond OUTLIER_K robust σ of
+    the residuals, refitted until none is left (at most OUTLIER_ROUNDS times).
+    """
+    keep = np.ones(problem.r0.size, bool)
+    sol = problem.solve(R, x0, keep)
     for _ in range(OUTLIER_ROUNDS):
-        res = make_residual(R)(sol.x)
+        res = problem.residual(R)(sol.x)
         sigma = 1.4826 * np.median(np.abs(res[keep]))
         new = np.abs(res) <= OUTLIER_K * max(sigma, 1e-9)
         if np.array_equal(new, keep):
             break
         keep = new
-        if np.bincount(vix[keep], minlength=nv).min() < min_points:
+        if np.bincount(problem.vix[keep], minlength=problem.nv).min() < min_points:
             raise ValueError("master_fit: too few points left in a view after dropping "
                              "outliers")
-        sol = solve(R, sol.x)
+        sol = problem.solve(R, sol.x, keep)
+    return sol, keep
+
+
+def _fit_covariance(sol) -> np.ndarray:
+    """The parameters' covariance from the fit's residuals (``s²·(JᵀJ)⁺``)."""
     n_par = sol.x.size
     dof = max(sol.fun.size - n_par, 1)
     s2 = float(sol.fun @ sol.fun) / dof
     J = sol.jac
-    cov = s2 * np.linalg.pinv(J.T @ J)
-    # the masters' diameters: each master's shots moved together by its u (type B)
+    return s2 * np.linalg.pinv(J.T @ J)
+
+
+def _master_diameter_moves(problem: _MasterProblem, R, group, u_master, x, keep) -> list:
+    """The masters' diameters (type B): per master with ``u`` > 0, the parameters' change when
+    its shots' radii all move by ``u/2``."""
     moves = []
     for g, u in enumerate(u_master):
         if u > 0:
             Rg = R + np.where(group == g, 0.5 * u, 0.0)
-            moves.append(solve(Rg, sol.x).x - sol.x)
-    c, t, dr, ds = unpack(sol.x)
-    i_dr = 2 * m + 2 * no
-    i_ds = i_dr + nv
+            moves.append(problem.solve(Rg, x, keep).x - x)
+    return moves
+
+
+def _per_view_results(problem: _MasterProblem, names, x, cov, moves, masters) -> dict:
+    """Per view its radial offset, scale and their uncertainties (the fit's, the masters'),
+    and the uncertainty of a corrected radius at the masters' mean radius: quantity → view →
+    value, the quantities ``dr``, ``s``, ``u_dr``, ``u_s``, ``u_r``, ``u_fit``, ``u_master``."""
+    fit_scale = problem.fit_scale
+    _, _, dr, ds = problem.unpack(x)
+    i_dr = problem.i_dr
+    i_ds = i_dr + problem.nv
     r_mean = float(np.mean(0.5 * np.asarray(masters)))
     out = {k: {} for k in ("dr", "s", "u_dr", "u_s", "u_r", "u_fit", "u_master")}
-    for n, j in vcol.items():
+    for j, n in enumerate(names):
         idx = [i_dr + j] + ([i_ds + j] if fit_scale else [])
         g = np.array([1.0, r_mean][:len(idx)])  # d(radius at r_mean)/d(dr, ds)
         C = cov[np.ix_(idx, idx)]
@@ -319,13 +416,4 @@ def master_fit(result, diameters_mm, *, u_diameters_mm=None, reference: str = "d
                                                                     for mv in moves))) \
             if fit_scale else 0.0
         out["u_r"][n] = float(np.hypot(u_fit_r, u_mst_r))
-    return MasterFit(offsets_mm={n: t[col[n]].copy() for n in others},
-                     radial_offset_mm=out["dr"], scale=out["s"], u_radial_offset_mm=out["u_dr"],
-                     u_scale=out["u_s"], u_radius_mm=out["u_r"],
-                     u_fit_radial_offset_mm=out["u_fit"],
-                     u_master_radial_offset_mm=out["u_master"],
-                     diameters_mm=tuple(float(v) for v in masters),
-                     u_diameters_mm=tuple(float(v) for v in u_master),
-                     shots_per_master=tuple(int(np.sum(group == g)) for g in range(len(masters))),
-                     rms_mm=float(np.sqrt(np.mean(sol.fun ** 2))), fitted_scale=fit_scale,
-                     n_points=int(keep.sum()), n_outliers=int((~keep).sum()))
+    return out

@@ -246,6 +246,41 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
     """
     say = progress or (lambda msg: None)
     board = images.board
+    cam, names = _calibrate_camera(images, tangential, camera_model_rounds, say)
+    K, dist = cam.K, cam.dist
+    used_names = tuple(n for n, u in zip(names, cam.used) if u)
+    skipped: dict[str, str] = {n: "board not found or reprojection outlier"
+                               for n, u in zip(names, cam.used) if not u}
+    obs, obs_names, laser_obs, board_images = _mirror_observations(
+        images, K, dist, use_laser_boards_for_mirrors, skipped)
+    mids, lsqs, planes, rejected = _fit_mirrors(obs, obs_names, laser_obs, board, K, dist,
+                                                skipped, say)
+    lines = _laser_lines(images, K, dist, planes, laser_obs, board_images, rejected, skipped)
+    lines = select_laser_lines(lines, skipped)
+    say(f"laser plane: {len(lines)} poses")
+    laser = fit_laser_plane(list(lines.values()))
+    laser_groups = _leave_one_out_offsets(list(lines.values()), fit_laser_plane, laser)
+    mirror_planes, T = _place_frame(planes, laser, images.design)
+    unc = {
+        "camera": _camera_uncertainty(cam),
+        "mirrors": {name: _plane_unc(lsq.normal, lsq.d_mm, _lsq_abd_cov(lsq), g)
+                    for name, (lsq, g) in planes.items()},
+        "laser_plane": _plane_unc(laser.normal, laser.d_mm, laser.covariance, laser_groups),
+        "parameterisation": "planes: n' = normalise(n + a e1 + b e2), d' = d + delta; "
+                            "lts360.recon.calibration.uncertainty.tangent_basis(n) gives e1, e2",
+    }
+    cal = Calibration(image_size=cam.image_size, K=K, dist=dist,
+                      mirrors=tuple(mirror_planes[k] for k in sorted(mirror_planes)),
+                      laser_plane=(laser.normal, laser.d_mm), T_cam_meas=T, uncertainty=unc)
+    return RigCalibrationResult(calibration=cal, camera=cam, camera_images=used_names,
+                                mirror_observations={k: (obs_names[k], v) for k, v in obs.items()},
+                                mirror_midpoint=mids, mirror_lsq=lsqs, laser_lines=lines,
+                                laser=laser, skipped=skipped)
+
+
+def _calibrate_camera(images: CalibrationImages, tangential: bool, camera_model_rounds: int,
+                      say) -> tuple[CameraCalibration, list[str]]:
+    """Step 1: Zhang's method on the ``camera`` shots; returns it and the shots' names."""
     direct, names = [], []
     for s in images.shots:
         if s["kind"] == "camera":
@@ -256,11 +291,20 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
                            board_model_rounds=camera_model_rounds,
                            progress=lambda i, n: say(f"camera: board model {i}/{n}")
                            if i == n else None)
-    K, dist = cam.K, cam.dist
-    used_names = tuple(n for n, u in zip(names, cam.used) if u)
+    return cam, names
 
-    skipped: dict[str, str] = {n: "board not found or reprojection outlier"
-                               for n, u in zip(names, cam.used) if not u}
+
+def _mirror_observations(images: CalibrationImages, K, dist, use_laser_boards: bool,
+                         skipped: dict[str, str]):
+    """The real and the virtual board in the ``mirror`` shots, and in the ``laser`` shots whose
+    board is seen in a mirror too.
+
+    Returns ``(obs, obs_names, laser_obs, board_images)``: per mirror its observations and
+    their shots' names (laser shots' only with ``use_laser_boards``); per laser shot its
+    observation; the laser shots' board images read (to be read once).  Mirror shots without
+    both boards are added to ``skipped``.  ``ValueError`` if no mirror has an observation.
+    """
+    board = images.board
     obs: dict[str, list[MirrorObservation]] = {}
     obs_names: dict[str, list[str]] = {}
     laser_obs: dict[str, MirrorObservation] = {}
@@ -279,12 +323,24 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
                 skipped[s["name"]] = "real and virtual board not both found"
         else:
             continue
-        if ob is None or (s["kind"] == "laser" and not use_laser_boards_for_mirrors):
+        if ob is None or (s["kind"] == "laser" and not use_laser_boards):
             continue
         obs.setdefault(s["mirror"], []).append(ob)
         obs_names.setdefault(s["mirror"], []).append(s["name"])
     if not obs:
         raise ValueError("mirror calibration: no image shows a board directly and in a mirror")
+    return obs, obs_names, laser_obs, board_images
+
+
+def _fit_mirrors(obs, obs_names, laser_obs, board, K, dist, skipped: dict[str, str], say):
+    """Step 2: each mirror's plane, the paper's midpoint one and the robust joint
+    least-squares one (kept), with its leave-one-out offsets.
+
+    The pairs the robust fit throws out are removed from ``obs`` and ``obs_names`` (in place)
+    and added to ``skipped``.  Returns ``(mids, lsqs, planes, rejected)``: per mirror the
+    midpoint and the least-squares estimates, and ``(lsq, leave-one-out offsets)``; the names
+    of the shots thrown out.
+    """
     mids, lsqs, planes = {}, {}, {}
     rejected: set[str] = set()  # real/virtual pairs the mirror fit threw out
     for name in list(obs):
@@ -301,15 +357,31 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
         ob_list = obs[name]
         say(f"mirror {name}: {len(ob_list)} images kept")
         mid = mirror_from_midpoints(ob_list, board, K, dist)
-        groups = []
-        if len(ob_list) >= 3:
-            for i in range(len(ob_list)):
-                sub = ob_list[:i] + ob_list[i + 1:]
-                e = refine_mirror(sub, board, K, dist, initial=lsq)
-                groups.append(plane_offset_abd(lsq.normal, lsq.d_mm, e.normal, e.d_mm))
+        groups = _leave_one_out_offsets(
+            ob_list, lambda sub: refine_mirror(sub, board, K, dist, initial=lsq), lsq)
         mids[name], lsqs[name] = mid, lsq
         planes[name] = (lsq, groups)
+    return mids, lsqs, planes, rejected
 
+
+def _leave_one_out_offsets(items: list, refit, full) -> list:
+    """The jackknife of a plane: with three items or more, per item left out the refitted
+    plane's offset from ``full`` (:func:`plane_offset_abd`); none with fewer."""
+    groups = []
+    if len(items) >= 3:
+        for i in range(len(items)):
+            e = refit(items[:i] + items[i + 1:])
+            groups.append(plane_offset_abd(full.normal, full.d_mm, e.normal, e.d_mm))
+    return groups
+
+
+def _laser_lines(images: CalibrationImages, K, dist, planes, laser_obs, board_images,
+                 rejected: set[str], skipped: dict[str, str]) -> dict[str, LaserLine]:
+    """Step 3: the laser line on the board of every ``laser`` shot, the board posed from the
+    direct view and its calibrated mirror where it can be (:func:`_laser_board_pose`).
+
+    Shots whose line is not found are added to ``skipped``; ``board_images`` is emptied.
+    """
     lines: dict[str, LaserLine] = {}
     for s in images.shots:
         if s["kind"] != "laser":
@@ -317,42 +389,43 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
         image_board = board_images.pop(s["name"], None)
         if image_board is None:
             image_board = _read(images.root / s["image_board"])
-        pose, views = None, ("direct",)
-        name = s.get("mirror")
-        ob = laser_obs.get(s["name"])
-        if name in planes and ob is not None and s["name"] not in rejected:
-            # Seen in a calibrated mirror too (and not a wrongly matched pair): the pose from
-            # both views (stereo with the mirror's virtual camera).
-            lsq = planes[name][0]
-            pose = board_pose_in_mirror(ob.real_px, ob.virtual_px, board, K, dist,
-                                        lsq.normal, lsq.d_mm)
-            views = ("direct", name)
-        elif ob is not None:
-            # From the direct view alone, from the board the mirror detection found to be the
-            # real one: a plain detection may return the virtual board, which the laser (the
-            # mirrors covered) does not light.
-            pose = board_pose(ob.real_px, board, K, dist)
+        pose, views = _laser_board_pose(s, images.board, K, dist, planes, laser_obs, rejected)
         try:
             lines[s["name"]] = laser_line_points(_read(images.root / s["image_on"]),
                                                  _read(images.root / s["image_off"]),
-                                                 image_board, board, K, dist, pose=pose,
-                                                 pose_views=views)
+                                                 image_board, images.board, K, dist,
+                                                 pose=pose, pose_views=views)
         except ValueError as exc:
             skipped[s["name"]] = "; ".join(filter(None, (skipped.get(s["name"]), str(exc))))
-    lines = select_laser_lines(lines, skipped)
-    say(f"laser plane: {len(lines)} poses")
-    laser = fit_laser_plane(list(lines.values()))
-    laser_groups = []
-    if len(lines) >= 3:
-        keys = list(lines)
-        for i in range(len(keys)):
-            sub = [lines[k] for j, k in enumerate(keys) if j != i]
-            e = fit_laser_plane(sub)
-            laser_groups.append(plane_offset_abd(laser.normal, laser.d_mm, e.normal, e.d_mm))
+    return lines
 
+
+def _laser_board_pose(shot: dict, board: BoardGeometry, K, dist, planes, laser_obs,
+                      rejected: set[str]):
+    """A laser shot's board pose and the views it is taken from: ``(None, ("direct",))``
+    for :func:`laser_line_points` to pose the board itself when nothing better is known."""
+    name = shot.get("mirror")
+    ob = laser_obs.get(shot["name"])
+    if name in planes and ob is not None and shot["name"] not in rejected:
+        # Seen in a calibrated mirror too (and not a wrongly matched pair): the pose from
+        # both views (stereo with the mirror's virtual camera).
+        lsq = planes[name][0]
+        return board_pose_in_mirror(ob.real_px, ob.virtual_px, board, K, dist,
+                                    lsq.normal, lsq.d_mm), ("direct", name)
+    if ob is not None:
+        # From the direct view alone, from the board the mirror detection found to be the
+        # real one: a plain detection may return the virtual board, which the laser (the
+        # mirrors covered) does not light.
+        return board_pose(ob.real_px, board, K, dist), ("direct",)
+    return None, ("direct",)
+
+
+def _place_frame(planes, laser: LaserPlaneEstimate, design: dict):
+    """Step 4: the measurement frame ``T`` and the mirror planes (with their design
+    rectangles where there is a left and a right mirror); returns ``(mirror_planes, T)``."""
     mirror_planes = {name: MirrorPlane(name=name, n=lsq.normal, d_mm=lsq.d_mm)
                      for name, (lsq, _) in planes.items()}
-    dist_mm = images.design.get("mirror_corner_distance_mm")
+    dist_mm = design.get("mirror_corner_distance_mm")
     if dist_mm is None:
         raise ValueError("manifest.json: design.mirror_corner_distance_mm is needed to place "
                          "the measurement frame (the nominal axis relative to the mirrors)")
@@ -360,9 +433,15 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
     if {"left", "right"} <= set(mirror_planes):
         l, r = mirror_planes["left"], mirror_planes["right"]
         mirror_planes = {
-            "left": MirrorPlane("left", l.n, l.d_mm, _mirror_corners(l, r, T, images.design)),
-            "right": MirrorPlane("right", r.n, r.d_mm, _mirror_corners(r, l, T, images.design)),
+            "left": MirrorPlane("left", l.n, l.d_mm, _mirror_corners(l, r, T, design)),
+            "right": MirrorPlane("right", r.n, r.d_mm, _mirror_corners(r, l, T, design)),
         }
+    return mirror_planes, T
+
+
+def _camera_uncertainty(cam: CameraCalibration) -> dict:
+    """The intrinsics' standard deviations: OpenCV's, or the jackknife over boards where
+    there is one (boards, not corners, are the independent units)."""
     std_cv = dict(zip(CAMERA_STD_NAMES, (float(v) for v in cam.std_intrinsics[:9])))
     camera_unc = {"std": std_cv, "std_method": "opencv", "std_opencv": std_cv,
                   "rms_px": cam.rms_px, "n_images": int(cam.used.sum())}
@@ -370,22 +449,7 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
         camera_unc.update(std=dict(zip(CAMERA_STD_NAMES, (float(v) for v in cam.std_jackknife))),
                           std_method="jackknife over boards", cov=cam.cov_jackknife.tolist(),
                           cov_names=list(CAMERA_STD_NAMES))
-    unc = {
-        "camera": camera_unc,
-        "mirrors": {name: _plane_unc(lsq.normal, lsq.d_mm, _lsq_abd_cov(lsq), g)
-                    for name, (lsq, g) in planes.items()},
-        "laser_plane": _plane_unc(laser.normal, laser.d_mm, laser.covariance, laser_groups),
-        "parameterisation": "planes: n' = normalise(n + a e1 + b e2), d' = d + delta; "
-                            "lts360.recon.calibration.uncertainty.tangent_basis(n) gives e1, e2",
-    }
-    cal = Calibration(image_size=cam.image_size, K=K, dist=dist,
-                      mirrors=tuple(mirror_planes[k] for k in sorted(mirror_planes)),
-                      laser_plane=(laser.normal, laser.d_mm), T_cam_meas=T, uncertainty=unc)
-    return RigCalibrationResult(calibration=cal, camera=cam, camera_images=used_names,
-                                mirror_observations={k: (obs_names[k], v) for k, v in obs.items()},
-                                mirror_midpoint=mids, mirror_lsq=lsqs, laser_lines=lines,
-                                laser=laser, skipped=skipped)
-
+    return camera_unc
 
 def _lsq_abd_cov(est: MirrorEstimate) -> np.ndarray:
     """The (θ, φ, d) covariance of :func:`refine_mirror` in the (a, b, δ) parameterisation."""
