@@ -182,10 +182,6 @@ class MasterFit:
                 "u_scale": dict(self.u_scale), "u_radius_mm": dict(self.u_radius_mm)}
 
 
-def _polar_views(points: dict) -> dict:
-    return {n: (np.hypot(*p.T), np.arctan2(p[:, 1], p[:, 0])) for n, p in points.items()}
-
-
 def master_fit(result, diameters_mm, *, u_diameters_mm=None, reference: str = "direct",
                min_points: int = 10) -> MasterFit:
     """Mastering: the joint §4.4 fit with round references of known diameter.
