@@ -20,8 +20,10 @@ class _Parser(argparse.ArgumentParser):
 def _set_variant(name: str | None) -> str:
     import mitsuba as mi
 
+    from lts360.simulator.render import default_variant
+
     if name is None:
-        name = "llvm_ad_mono" if "llvm_ad_mono" in mi.variants() else mi.variants()[0]
+        name = default_variant()
     if name not in mi.variants():
         raise UsageError(f"--variant: {name!r} is not compiled into this Mitsuba; choose one of "
                          f"{', '.join(mi.variants())}")

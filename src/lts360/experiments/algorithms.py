@@ -37,16 +37,14 @@ METRICS = ("bias_um", "std_um", "rms_um", "coverage_deg", "n_points", "seconds")
 
 
 def _render(out: Path, name: str, *, rig: str, spp: int, seed: int) -> Path:
-    import mitsuba as mi
-
     from lts360.scenes.objects import build_object
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import simulate_frame, write_frame
+    from lts360.simulator.render import ensure_variant
 
     d = out / "renders" / name
     if not is_frame(d):
-        if mi.variant() is None:
-            mi.set_variant("llvm_ad_mono")
+        ensure_variant()
         obj = build_object(name)
         zc = float(np.mean(obj.measured_zone_z_mm))
         write_frame(d, simulate_frame(load_rig(rig), obj, z_mm=zc, spp=spp, seed=seed,

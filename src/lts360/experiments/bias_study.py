@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study
+from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study, trial_setup
 
 __all__ = ["DEFAULT_DIAMETERS_MM", "DEFAULT_PLACEMENTS_MM", "run_bias_study", "bias_trial",
            "format_bias_table"]
@@ -44,22 +44,14 @@ def _score(cloud, center, r_true: float) -> dict:
 
 def bias_trial(trial: Trial) -> TrialOutput:
     """Render one gauge, measure it plain and twin-corrected, score both."""
-    import mitsuba as mi
-
     from lts360.recon.model import calibration_from_frame_truth
     from lts360.recon.triangulation.measure import Section, measure_sections_following
-    from lts360.scenes.objects import build_object
-    from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import simulate_frame
-    from lts360.simulator.render import default_variant
     from lts360.twin import TwinCorrector
 
     p = trial.params
-    if mi.variant() is None:
-        mi.set_variant(p.get("variant") or default_variant())
-    rig = load_rig(p["rig"])
     d = float(p["diameter_mm"])
-    obj = build_object(f"plug-gauge:d={d},x={p['x_mm']},y={p['y_mm']}")
+    rig, obj = trial_setup(p, spec=f"plug-gauge:d={d},x={p['x_mm']},y={p['y_mm']}")
     frame = simulate_frame(rig, obj, spp=int(p["spp"]), seed=trial.seed, noise=p["noise"])
     cal = calibration_from_frame_truth(frame.truth)
     sec = [Section(Path("memory"), 0.0, image=frame.image)]

@@ -49,13 +49,12 @@ MIN_SHARE_DRAWS = 3
 
 def check_rig(rig, *, draws: int = 200, spp: int = 16, seed: int = 0) -> dict:
     """Model and simulation side by side for one rig (µm)."""
-    import mitsuba as mi
     from scipy.stats import chi2
 
     from lts360.experiments.design_space.trial import _monte_carlo
+    from lts360.simulator.render import ensure_variant
 
-    if mi.variant() is None:
-        mi.set_variant("llvm_ad_mono")
+    ensure_variant()
     space = DesignSpace.create(rig)
     out = {"rig": rig.name}
     for speckle in ("pixel", "dorsch"):
@@ -334,8 +333,6 @@ def check_calibrations(rig, files, *, spp: int = 16, seed: int = 0,
     95 % interval, and the model's share for the plan's predicted covariance and for each
     file's own covariance.
     """
-    import mitsuba as mi
-
     from lts360.design.calib_covariance import plan_covariance
     from lts360.design.model import Conditions, evaluate
     from lts360.design.params import DesignSpace
@@ -351,11 +348,11 @@ def check_calibrations(rig, files, *, spp: int = 16, seed: int = 0,
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.scenes.objects import build_object
     from lts360.simulator.frame import sensor_image, simulate_frame
+    from lts360.simulator.render import ensure_variant
 
     if len(files) < 3:
         raise ValueError(f"check_calibrations: need at least 3 calibration files, got {len(files)}")
-    if mi.variant() is None:
-        mi.set_variant("llvm_ad_mono")
+    ensure_variant()
     render_seeds = [int(v) for v in np.random.SeedSequence(int(seed)).generate_state(2)]
     ref_obj = build_object(GAUGE_SPEC)
     test_obj = build_object(f"{GAUGE_SPEC}:d={GAUGE_DIAMETER_MM},x={float(placement_mm)!r},y=0")
@@ -470,7 +467,7 @@ def check_shares(rig, *, draws: int, spp: int, seed: int, placement_mm: float = 
     ValueError
         A bad argument or calibration file (one line naming it).
     """
-    import mitsuba as mi
+    from lts360.simulator.render import ensure_variant
 
     msg = share_args_error(draws, spp, placement_mm, calibration)
     if msg:
@@ -478,8 +475,7 @@ def check_shares(rig, *, draws: int, spp: int, seed: int, placement_mm: float = 
     if not (isinstance(scale, (int, float)) and 0.0 < scale <= 1.0):
         raise ValueError(f"scale: must be in (0, 1], got {scale!r}")
     unc, file_cal = file_uncertainty(calibration) if calibration is not None else (None, None)
-    if mi.variant() is None:
-        mi.set_variant("llvm_ad_mono")
+    ensure_variant()
     t0 = time.perf_counter()
     sim = _simulate_shares(rig, draws=int(draws), spp=int(spp), seed=int(seed),
                            placement_mm=float(placement_mm), uncertainty=unc,

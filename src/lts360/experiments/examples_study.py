@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study
+from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study, trial_setup
 
 __all__ = ["PAPER_EXAMPLES", "EXTRA_EXAMPLES", "examples_trial", "run_examples_study", "format_examples"]
 
@@ -43,21 +43,14 @@ def examples_trial(trial: Trial) -> TrialOutput:
     """Render and measure one object's scan; write its cloud and figure; return its metrics."""
     import time
 
-    import mitsuba as mi
-
     from lts360.experiments.score import score_cloud
     from lts360.recon.model import calibration_from_frame_truth, load_calibration
     from lts360.recon.triangulation.cloud import write_cloud
     from lts360.recon.triangulation.measure import Section, measure_sections_following
-    from lts360.scenes.objects import build_object
-    from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import simulate_frame
 
     p = trial.params
-    if mi.variant() is None:
-        mi.set_variant(p.get("variant", "llvm_ad_mono"))
-    obj = build_object(p["object"])
-    rig = load_rig(p["rig"])
+    rig, obj = trial_setup(p)
     n, pitch = int(p["sections"]), float(p["pitch_mm"])
     zc = float(np.mean(obj.measured_zone_z_mm))
     zs = zc + (np.arange(n) - (n - 1) / 2.0) * pitch

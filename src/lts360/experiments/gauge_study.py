@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study
+from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study, trial_setup
 
 __all__ = ["GAUGE_DIAMETER_MM", "DEFAULT_PLACEMENT_MM", "placement_band_mm", "by_offset",
            "PAPER_TABLE", "gauge_placements", "plug_gauge_trial",
@@ -217,20 +217,14 @@ def measure_gauge_image(image, cal_path: str, *, r_true_mm: float, band_mm: floa
 
 def plug_gauge_trial(trial: Trial) -> TrialOutput:
     """Render the gauge at the trial's placement (realistic noise) and measure it."""
-    import mitsuba as mi
-
-    from lts360.scenes.objects import build_object
-    from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import simulate_frame
 
     p = trial.params
-    if mi.variant() is None:
-        mi.set_variant(p.get("variant", "llvm_ad_mono"))
-    obj = build_object(p["spec"])
+    rig, obj = trial_setup(p, spec=p["spec"])
     r_mm = obj.params["diameter_mm"] / 2
     band = placement_band_mm(float(p.get("placement_mm", DEFAULT_PLACEMENT_MM)))
     # Only the pixels the measurement reads are rendered (the rest of the image is not used).
-    frame = simulate_frame(load_rig(p["rig"]), obj, spp=int(p["spp"]), seed=trial.seed,
+    frame = simulate_frame(rig, obj, spp=int(p["spp"]), seed=trial.seed,
                            noise=p["noise"],
                            pixels_xy=gauge_window_pixels(p["calibration"], r_mm, band_mm=band),
                            max_scatter=int(p.get("max_scatter", 0)))
@@ -309,7 +303,7 @@ def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str,
     store their offsets in a copy of the calibration."""
     import dataclasses
 
-    import mitsuba as mi
+    from lts360.simulator.render import ensure_variant
 
     from lts360.recon.model import load_calibration, save_calibration
     from lts360.recon.calibration.compensation import joint_view_offsets
@@ -328,8 +322,7 @@ def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str,
                                            else "-master") + ".json")
     if path.is_file():
         return path
-    if mi.variant() is None:
-        mi.set_variant("llvm_ad_mono")
+    ensure_variant()
     cal = load_calibration(cal_path)
     obj = build_object(f"plug-gauge:d={GAUGE_DIAMETER_MM}")
     r = GAUGE_DIAMETER_MM / 2

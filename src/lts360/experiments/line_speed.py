@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study
+from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study, trial_setup
 
 __all__ = ["line_speed_trial", "run_line_speed_study", "lumps_missed", "format_line_speed",
            "DEFAULT_OBJECTS"]
@@ -65,24 +65,17 @@ def _object_frame_points(points_world_mm, times_s, motion, T_placed) -> np.ndarr
 
 def line_speed_trial(trial: Trial) -> TrialOutput:
     """Render one moving frame, measure it with the true calibration, score it two ways."""
-    import mitsuba as mi
-
     from lts360.experiments.score import true_radius_band
     from lts360.recon.model import calibration_from_frame_truth
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.recon.triangulation.measure import RowTiming, result_to_cloud
     from lts360.scenes.motion import Acquisition, Motion, Shutter
-    from lts360.scenes.objects import build_object
-    from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import stage_transform
     from lts360.simulator.motion import simulate_moving_frame
 
     p = trial.params
-    if mi.variant() is None:
-        mi.set_variant(p.get("variant", "llvm_ad_mono"))
-    rig = load_rig(p["rig"])
-    obj = build_object(p["object"])
+    rig, obj = trial_setup(p)
     shutter = (Shutter("rolling", p["line_time_us"] * 1e-6) if p["shutter"] == "rolling"
                else Shutter())
     exposure_s = p["exposure_us"] * 1e-6

@@ -311,16 +311,14 @@ def mc_trial(trial: Trial) -> TrialOutput:
 
 def _render_placements(out: Path, n: int, *, rig: str, seed: int, spp: int, say,
                        placement_mm: float = DEFAULT_PLACEMENT_MM) -> Path:
-    import mitsuba as mi
-
     from lts360.scenes.objects import build_object
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import simulate_frame, write_frame
+    from lts360.simulator.render import ensure_variant
 
     root = out / ("renders" if placement_mm == DEFAULT_PLACEMENT_MM
                   else f"renders-{placement_mm:g}mm")
-    if mi.variant() is None:
-        mi.set_variant("llvm_ad_mono")
+    ensure_variant()
     for k, params in enumerate(gauge_placements(n, seed, offset_mm=placement_mm)):
         d = root / f"placement_{k:02d}"
         if is_frame(d):

@@ -31,6 +31,7 @@ import pickle
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import xarray as xr
@@ -38,8 +39,12 @@ from tqdm import tqdm
 
 from lts360.simulator.io import atomic_path, write_json
 
+if TYPE_CHECKING:
+    from lts360.scenes.objects import SceneObject
+    from lts360.scenes.rig import Rig
+
 __all__ = ["Trial", "TrialOutput", "TrialError", "plan_trials", "grid_params", "run_study",
-           "to_grid", "trial_path"]
+           "to_grid", "trial_path", "trial_setup"]
 
 logger = logging.getLogger(__name__)
 
@@ -185,6 +190,40 @@ class TrialError(RuntimeError):
     def __init__(self, message: str, index: int) -> None:
         super().__init__(message)
         self.index = index
+
+
+# --- a trial's set-up ---------------------------------------------------------------------------
+
+
+def trial_setup(params: dict, *, spec: str | None = None) -> tuple[Rig, SceneObject]:
+    """The Mitsuba variant, the rig and the object of a trial, from its parameters.
+
+    Every study's trial function opens with this (a worker process starts with no variant).
+
+    Parameters
+    ----------
+    params : dict
+        The trial's parameters: ``rig`` (a preset name or a rig TOML path), ``object`` (an object
+        spec, e.g. ``"plug-gauge:d=20"``; not read when ``spec`` is given) and, optionally,
+        ``variant`` (a Mitsuba variant; absent or empty: :func:`default_variant`).
+    spec : str, optional
+        The object's spec, where the trial names its object otherwise (another parameter, or a
+        spec built from several).
+
+    Returns
+    -------
+    (Rig, SceneObject)
+        The loaded rig and the built object. The variant is set only where none is set yet (a
+        variant already set, e.g. by the command line, is kept).
+    """
+    from lts360.scenes.objects import build_object
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.render import ensure_variant
+
+    ensure_variant(params.get("variant") or None)
+    rig = load_rig(params["rig"])
+    obj = build_object(params["object"] if spec is None else spec)
+    return rig, obj
 
 
 # --- running ------------------------------------------------------------------------------------

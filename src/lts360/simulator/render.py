@@ -1,7 +1,8 @@
 """Render the noise-free expected radiance of a rig + scene with the laser integrator.
 
-The caller chooses the Mitsuba variant once (``mi.set_variant``) before calling
-:func:`render_radiance`; nothing here sets it.
+The caller sets the Mitsuba variant once (``mi.set_variant``, or :func:`ensure_variant`) before
+calling :func:`render_radiance`, which sets none. :func:`default_variant` is the one place that
+chooses a variant when nobody names one.
 """
 
 from __future__ import annotations
@@ -17,17 +18,49 @@ from lts360.simulator.scene import LASER_MIRRORS_CLEARANCE_MM, SceneSpec, load_s
 __all__ = ["MAX_SPP", "RenderResult", "render_radiance", "render_pixels", "render_radiance_pixels",
            "prepare_scene",
            "window_pixels", "require_variant",
-           "default_variant"]
+           "default_variant", "ensure_variant", "cuda_usable"]
 
 VARIANTS = ("llvm_ad_mono", "cuda_ad_mono", "scalar_mono", "scalar_rgb", "llvm_ad_rgb", "cuda_ad_rgb")
 
 
+def cuda_usable() -> bool:
+    """Whether Dr.Jit can run on a CUDA device here; ``False`` without a driver or a device.
+
+    Asks Dr.Jit (``drjit.has_backend``), which loads the CUDA driver if there is one and
+    answers ``False`` where there is none; never raises.
+    """
+    try:
+        import drjit as dr
+
+        return bool(dr.has_backend(dr.JitBackend.CUDA))
+    except Exception:  # an old Dr.Jit without has_backend, a broken driver: not usable
+        return False
+
+
 def default_variant() -> str:
-    """``cuda_ad_mono`` where a CUDA device is usable, else ``llvm_ad_mono``."""
+    """``cuda_ad_mono`` where that variant is compiled in and a CUDA device is usable, else
+    ``llvm_ad_mono``, else the first compiled variant.
+
+    The one place that chooses a variant: the command line (no ``--variant``), the studies'
+    trials and the twin all take it from here (see :func:`ensure_variant`).
+    """
     import mitsuba as mi
 
     available = mi.variants()
+    if "cuda_ad_mono" in available and cuda_usable():
+        return "cuda_ad_mono"
     return "llvm_ad_mono" if "llvm_ad_mono" in available else available[0]
+
+
+def ensure_variant(name: str | None = None) -> str:
+    """The active Mitsuba variant, setting one first if none is set: ``name`` when given (and
+    not empty), else :func:`default_variant`. A variant already set is kept, whatever ``name``.
+    """
+    import mitsuba as mi
+
+    if mi.variant() is None:
+        mi.set_variant(name or default_variant())
+    return mi.variant()
 
 
 def require_variant() -> str:

@@ -231,15 +231,12 @@ class TwinCorrector:
                rig: Rig | None = None) -> np.ndarray:
         """The twin's noise-free digital image of ``surface`` (a closed mesh, or a profile
         extruded straight; only ``pixels_xy`` rendered; ``rig`` defaults to :attr:`rig`)."""
-        import mitsuba as mi
-
         from lts360.simulator.frame import sensor_image
         from lts360.simulator.materials import material_to_bsdf
-        from lts360.simulator.render import default_variant, render_radiance_pixels
+        from lts360.simulator.render import ensure_variant, render_radiance_pixels
         from lts360.simulator.scene import SceneSpec
 
-        if mi.variant() is None:
-            mi.set_variant(default_variant())
+        ensure_variant()
         rig = self.rig if rig is None else rig
         mesh = (surface if hasattr(surface, "faces")
                 else loft_mesh(surface, half_length_mm=self.half_length_mm))

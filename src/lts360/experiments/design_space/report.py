@@ -156,7 +156,9 @@ def _machine() -> str:
     try:
         import mitsuba as mi
 
-        variant = mi.variant() or "llvm_ad_mono (set by the trials)"
+        from lts360.simulator.render import default_variant
+
+        variant = mi.variant() or f"{default_variant()} (set by the trials)"
         mitsuba = f"Mitsuba {mi.__version__}, variant {variant}"
     except ImportError:
         mitsuba = "Mitsuba not installed"

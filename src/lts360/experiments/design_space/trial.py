@@ -254,7 +254,8 @@ def design_space_trial(trial: Trial) -> TrialOutput:
 
     ``trial.params``: ``alpha_deg``, ``beta_deg`` and optionally ``draws`` (default 8; 0 =
     geometry only), ``spp`` (16), ``scale`` (1.0: the image scale of the render; the true
-    calibration follows it).  Sets the Mitsuba variant ``llvm_ad_mono`` if none is set.
+    calibration follows it).  Sets the Mitsuba variant (:func:`~lts360.simulator.render.default_variant`)
+    if none is set.
     Returns the scalars of the module docstring, ``status`` and ``radius_error_mm(draw)``.
     """
     t0 = time.perf_counter()
@@ -272,10 +273,9 @@ def design_space_trial(trial: Trial) -> TrialOutput:
         values.update(geometry_metrics(rig))
         values["status"] = 0
         if s["draws"] > 0:
-            import mitsuba as mi
+            from lts360.simulator.render import ensure_variant
 
-            if mi.variant() is None:
-                mi.set_variant("llvm_ad_mono")
+            ensure_variant()
             values.update(_monte_carlo(rig, draws=s["draws"], spp=s["spp"], scale=s["scale"],
                                        seed=trial.seed))
             if values["n_failed_draws"] == s["draws"]:
