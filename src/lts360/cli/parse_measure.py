@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from lts360.cli.usage import VARIANT_HELP
+
 from lts360.cli.commands import (
     cmd_calibrate,
     cmd_compensate,
@@ -206,5 +208,5 @@ def _add_calibrate_parser(sub) -> None:
                    "field (the limit of a fully stopped-down lens)")
     s.add_argument("--f-number", type=float, default=None, help="aperture of the calibration "
                    "images (default: the rig's; stopping down sharpens the small boards)")
-    s.add_argument("--variant", default=None, help="Mitsuba variant (default llvm_ad_mono)")
+    s.add_argument("--variant", default=None, help=VARIANT_HELP)
     s.set_defaults(func=cmd_calibrate)

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from lts360.cli.usage import VARIANT_HELP
+
 from lts360.cli.commands import cmd_object, cmd_objects, cmd_render, cmd_rig
 from lts360.scenes.coverage import MAX_BOUNCES
 from lts360.simulator.integrator import MAX_SCATTER
@@ -40,7 +42,7 @@ def _add_render_parser(sub) -> None:
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--spp", type=int, default=16, help="samples per pixel (default 16)")
     s.add_argument("--variant", default=None,
-                   help="Mitsuba variant: llvm_ad_mono (default), cuda_ad_mono, scalar_rgb, ...")
+                   help=VARIANT_HELP)
     s.add_argument("--laser", choices=("on", "off"), default="on")
     s.add_argument("--ambient", choices=("off", "dim", "bright"), default="off")
     s.add_argument("--scale", type=float, default=1.0, help="image scale in (0, 1]")

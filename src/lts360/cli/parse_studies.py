@@ -14,7 +14,7 @@ from lts360.cli.studies import (
     cmd_study_monte_carlo,
     cmd_study_plug_gauge,
 )
-from lts360.cli.usage import _Parser
+from lts360.cli.usage import VARIANT_HELP, _Parser
 from lts360.simulator.integrator import MAX_SCATTER
 from lts360.twin.debias import DEFAULT_TWIN_SPP
 
@@ -43,7 +43,7 @@ def _study_parser(studies, name, help_text):
     q.add_argument("--workers", type=int, default=None, help="local processes")
     q.add_argument("--dask", default=None, metavar="ADDRESS",
                    help="run the trials on a Dask distributed scheduler")
-    q.add_argument("--variant", default=None, help="Mitsuba variant (default llvm_ad_mono)")
+    q.add_argument("--variant", default=None, help=VARIANT_HELP)
     return q
 
 
@@ -153,7 +153,7 @@ def _add_interreflection(studies) -> None:
     q.add_argument("--figure-spp", type=int, default=64)
     q.add_argument("--skip-validation", action="store_true",
                    help="only the figures (the path comparison takes minutes)")
-    q.add_argument("--variant", default=None, help="Mitsuba variant (default llvm_ad_mono)")
+    q.add_argument("--variant", default=None, help=VARIANT_HELP)
     q.set_defaults(func=cmd_study_interreflection)
 
 
@@ -203,7 +203,7 @@ def add_demo_parser(sub) -> None:
     s = sub.add_parser("demo", help="run the main job: rig, coverage, objects, figures")
     s.add_argument("--out", default="lts360-demo", help="output directory (default ./lts360-demo)")
     s.add_argument("--radius-mm", type=float, default=10.0, help="section radius for the coverage")
-    s.add_argument("--variant", default=None, help="Mitsuba variant (default llvm_ad_mono)")
+    s.add_argument("--variant", default=None, help=VARIANT_HELP)
     s.add_argument("--no-render", action="store_true", help="skip the rendered frames")
     s.add_argument("--quick", action="store_true", help="skip the calibration and the "
                    "plug-gauge study (a few seconds instead of minutes)")

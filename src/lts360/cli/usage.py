@@ -5,7 +5,11 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["UsageError"]
+__all__ = ["UsageError", "VARIANT_HELP"]
+
+#: The help of every --variant option (the choice is lts360.simulator.render.default_variant's).
+VARIANT_HELP = ("Mitsuba variant (default: cuda_ad_mono where a CUDA device is usable, else "
+                "llvm_ad_mono)")
 
 
 class UsageError(Exception):
