@@ -35,7 +35,6 @@ def main() -> None:
 
     from lts360.design import model as M
     from lts360.design.params import DesignSpace
-
     from lts360.design.shares import CalibrationCovariance
 
     space = DesignSpace.create("paper")

@@ -353,8 +353,8 @@ def section_grid(theta_step_deg: float):
 
 def recon_rows(image, cal, backend: str, size: dict) -> tuple[list[dict], dict]:
     """Rows of part 2: plan and setup times, ms per section, agreement with LLVM and numpy."""
-    from lts360.recon.triangulation.fast import FastInverse
     from lts360.recon.images import default_saturation, default_threshold
+    from lts360.recon.triangulation.fast import FastInverse
     from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
 
     grid = section_grid(size["theta_step_deg"])

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from lts360.cli import main
+from lts360.folders import read_image as read_png
 from lts360.scenes.objects import build_object
 from lts360.scenes.objects.profile_part import extrude_ring
-from lts360.folders import read_image as read_png
 from lts360.simulator.io import read_exr
 
 #: Small, fast frames: 1/8 scale, 2 spp, a fixed exposure (auto-exposure would hide a change).

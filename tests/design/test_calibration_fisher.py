@@ -277,8 +277,7 @@ def test_camera_covariance_matches_monte_carlo_of_zhang(rig_plan):
 def test_mirror_covariance_matches_monte_carlo_of_refine_mirror(rig_plan):
     """Perturb real and virtual corners, refit with the calibration's ``refine_mirror``."""
     from lts360.recon.calibration.board import BoardGeometry
-    from lts360.recon.calibration.mirrors import (MirrorEstimate, MirrorObservation,
-                                                  refine_mirror)
+    from lts360.recon.calibration.mirrors import MirrorEstimate, MirrorObservation, refine_mirror
     from lts360.recon.calibration.uncertainty import plane_offset_abd
 
     rig, shots = rig_plan
@@ -317,8 +316,11 @@ def test_laser_plane_covariance_matches_monte_carlo(rig_plan):
     ``board_pose_in_mirror``, the mirror fixed); noisy line points across the line →
     back-projected onto that board plane; the calibration's plane fit."""
     from lts360.recon.calibration.board import BoardGeometry
-    from lts360.recon.calibration.laser_plane import (LaserLine, board_pose_in_mirror,
-                                                      fit_laser_plane)
+    from lts360.recon.calibration.laser_plane import (
+        LaserLine,
+        board_pose_in_mirror,
+        fit_laser_plane,
+    )
     from lts360.recon.calibration.uncertainty import plane_offset_abd
 
     rig, shots = rig_plan

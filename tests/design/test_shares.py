@@ -15,8 +15,13 @@ from scipy.optimize import least_squares
 
 from lts360.design import model as M
 from lts360.design.params import DesignSpace
-from lts360.design.shares import (CAMERA_NAMES, PLANE_NAMES, CalibrationCovariance,
-                                  compensation_shares, tangent_basis_np)
+from lts360.design.shares import (
+    CAMERA_NAMES,
+    PLANE_NAMES,
+    CalibrationCovariance,
+    compensation_shares,
+    tangent_basis_np,
+)
 from lts360.design.smallmat import spd_inverse_ridged as spd_inverse
 from lts360.geometry.camera import project_points
 from lts360.geometry.fit import fit_circle

@@ -11,10 +11,17 @@ import math
 import numpy as np
 import pytest
 
-from lts360.experiments.design_space import (PAPER_DESIGN, STATUS, design_rig,
-                                             design_space_trial, format_design_space,
-                                             geometry_metrics, parse_range, rig_status,
-                                             run_design_space_study)
+from lts360.experiments.design_space import (
+    PAPER_DESIGN,
+    STATUS,
+    design_rig,
+    design_space_trial,
+    format_design_space,
+    geometry_metrics,
+    parse_range,
+    rig_status,
+    run_design_space_study,
+)
 from lts360.experiments.runner import Trial, trial_path
 from lts360.scenes.coverage import coverage
 from lts360.scenes.rig import RigError

@@ -19,8 +19,16 @@ import pytest
 import xarray as xr
 
 import lts360
-from lts360.experiments.runner import (Trial, TrialError, TrialOutput, grid_params, plan_trials,
-                                       run_study, to_grid, trial_path)
+from lts360.experiments.runner import (
+    Trial,
+    TrialError,
+    TrialOutput,
+    grid_params,
+    plan_trials,
+    run_study,
+    to_grid,
+    trial_path,
+)
 
 ALPHAS_DEG = [30.0, 40.0]
 BETAS_DEG = [80.0, 85.0, 90.0]

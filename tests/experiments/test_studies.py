@@ -11,10 +11,18 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from lts360.experiments.gauge_study import (GAUGE_DIAMETER_MM, PAPER_TABLE, gauge_placements,
-                                            gauge_table)
-from lts360.experiments.monte_carlo import (_tolerance, adaptive_stable, coverage_interval,
-                                            dorsch_speckle_limit_um)
+from lts360.experiments.gauge_study import (
+    GAUGE_DIAMETER_MM,
+    PAPER_TABLE,
+    gauge_placements,
+    gauge_table,
+)
+from lts360.experiments.monte_carlo import (
+    _tolerance,
+    adaptive_stable,
+    coverage_interval,
+    dorsch_speckle_limit_um,
+)
 
 
 def test_placements_are_seeded_and_within_the_tolerance():

@@ -1,11 +1,19 @@
 import numpy as np
 import pytest
-from hypothesis import given, strategies as st
+from hypothesis import given
+from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from lts360.geometry import (backproject_pixels, camera_center, distort_normalized, look_at,
-                             project_camera_points, project_points, undistort_normalized,
-                             world_to_camera)
+from lts360.geometry import (
+    backproject_pixels,
+    camera_center,
+    distort_normalized,
+    look_at,
+    project_camera_points,
+    project_points,
+    undistort_normalized,
+    world_to_camera,
+)
 
 K = np.array([[1509.4, 0.0, 639.5], [0.0, 1509.4, 511.5], [0.0, 0.0, 1.0]])
 # Distortions of real 8 mm lenses lie well inside these bounds (|k1| ~ 0.1-0.3).

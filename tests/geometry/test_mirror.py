@@ -1,11 +1,20 @@
 import numpy as np
 import pytest
-from hypothesis import given, strategies as st
+from hypothesis import given
+from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from lts360.geometry import (camera_center, look_at, mirror_matrix, project_points,
-                             reflect_directions, reflect_points, reflect_pose, reflect_rays,
-                             transform_plane)
+from lts360.geometry import (
+    camera_center,
+    look_at,
+    mirror_matrix,
+    project_points,
+    reflect_directions,
+    reflect_points,
+    reflect_pose,
+    reflect_rays,
+    transform_plane,
+)
 
 normal_st = arrays(float, 3, elements=st.floats(-1, 1)).filter(lambda v: np.linalg.norm(v) > 0.1)
 offset_st = st.floats(-200, 200)

@@ -2,13 +2,16 @@
 
 import numpy as np
 import pytest
+from _profiles import polar
 
 from lts360.geometry.fit import fit_circle
-from lts360.inspect.circles import (least_squares_circle, maximum_inscribed_circle,
-                                    minimum_circumscribed_circle, minimum_zone_circle,
-                                    reference_circles)
-
-from _profiles import polar
+from lts360.inspect.circles import (
+    least_squares_circle,
+    maximum_inscribed_circle,
+    minimum_circumscribed_circle,
+    minimum_zone_circle,
+    reference_circles,
+)
 
 
 def test_ls_circle_agrees_with_the_geometry_fit():

@@ -2,12 +2,11 @@
 
 import numpy as np
 import pytest
+from _profiles import constant_width, ellipse, polar
 
 from lts360.inspect.circles import least_squares_circle
 from lts360.inspect.diameters import calliper_widths, diameters
 from lts360.inspect.profile import bin_profile
-
-from _profiles import constant_width, ellipse, polar
 
 
 def _dia(xy, bin_deg=0.5):

@@ -3,13 +3,11 @@ noisy sections within their own U (the noise bias carried in U)."""
 
 import numpy as np
 import pytest
+from _profiles import noisy_section_cloud, polar
 
-from lts360.inspect.extremes import (default_upr, extreme_quantities, filter_grid,
-                                     gaussian_transfer)
+from lts360.inspect.extremes import default_upr, extreme_quantities, filter_grid, gaussian_transfer
 from lts360.inspect.profile import bin_profile, gaussian_filter
 from lts360.inspect.run import inspect_cloud
-
-from _profiles import noisy_section_cloud, polar
 
 ORDERS = (2, 5, 30, 80, 150, 200, 300)
 

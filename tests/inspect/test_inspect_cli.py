@@ -5,11 +5,10 @@ import json
 
 import numpy as np
 import pytest
+from _profiles import scan_cloud
 
 from lts360.cli import main
 from lts360.recon.triangulation.cloud import Cloud, write_cloud
-
-from _profiles import scan_cloud
 
 
 @pytest.fixture(scope="module")

@@ -5,11 +5,10 @@ import dataclasses
 
 import numpy as np
 import pytest
+from _profiles import polar
 
 from lts360.inspect.section import analyse_section
 from lts360.inspect.uncertainty import calibration_u, retriangulate, scatter_u
-
-from _profiles import polar
 
 
 @pytest.fixture(scope="module")

@@ -2,11 +2,16 @@
 
 import numpy as np
 import pytest
-
-from lts360.inspect.nominal import (ToleranceBand, deviations, load_nominal, place_nominal,
-                                    read_contour_csv, read_contour_dxf)
-
 from _profiles import polar
+
+from lts360.inspect.nominal import (
+    ToleranceBand,
+    deviations,
+    load_nominal,
+    place_nominal,
+    read_contour_csv,
+    read_contour_dxf,
+)
 
 
 def _write_csv(path, xy, header="x_mm,y_mm"):

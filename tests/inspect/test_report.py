@@ -9,12 +9,11 @@ import subprocess
 
 import numpy as np
 import pytest
+from _profiles import scan_cloud
 
 from lts360.inspect.nominal import ToleranceBand, load_nominal
 from lts360.inspect.report import FIGURES, write_report
 from lts360.inspect.run import inspect_cloud
-
-from _profiles import scan_cloud
 
 
 @pytest.fixture(scope="module")

@@ -3,11 +3,10 @@ cylinder, the spectrum of an undulating diameter."""
 
 import numpy as np
 import pytest
+from _profiles import scan_cloud
 
 from lts360.inspect.run import inspect_cloud
 from lts360.inspect.scan import cylindricity, diameter_spectrum, fit_axis, lumps_and_necks
-
-from _profiles import scan_cloud
 
 
 def test_a_dent_is_a_neck_down_at_its_z():

@@ -16,8 +16,14 @@ import pytest
 
 from lts360.scenes.calib_plan import plan_calibration
 from lts360.scenes.rig_io import load_rig
-from lts360.simulator.board_window import (blur_radius_norm, board_pixels, board_windows,
-                                           clip_near, merge_boxes, view_box)
+from lts360.simulator.board_window import (
+    blur_radius_norm,
+    board_pixels,
+    board_windows,
+    clip_near,
+    merge_boxes,
+    view_box,
+)
 
 SCALE = 0.125
 

@@ -19,8 +19,12 @@ import pytest
 
 from lts360.geometry import backproject_pixels, project_points, scale_intrinsics
 from lts360.scenes.rig_io import load_rig
-from lts360.simulator.camera_plugin import (camera_to_mitsuba, newton_iterations_needed, register,
-                                            undistort_newton)
+from lts360.simulator.camera_plugin import (
+    camera_to_mitsuba,
+    newton_iterations_needed,
+    register,
+    undistort_newton,
+)
 
 mi = pytest.importorskip("mitsuba", reason="the simulator needs Mitsuba 3")
 

@@ -11,10 +11,10 @@ import pytest
 
 mi = pytest.importorskip("mitsuba", reason="the simulator needs Mitsuba 3")
 
+from lts360.folders import read_image as read_png
 from lts360.geometry import project_points  # noqa: E402
 from lts360.scenes.objects import build_object  # noqa: E402
 from lts360.scenes.rig_io import load_rig  # noqa: E402
-from lts360.folders import read_image as read_png
 from lts360.simulator.io import read_exr  # noqa: E402
 
 

@@ -10,10 +10,17 @@ from pathlib import Path
 
 import numpy as np
 
-from lts360.folders import (FRAME_FILE, frame_file, is_frame, is_scan, section_dir_name,
-                             section_dirs, write_scan_meta)
-from lts360.simulator.render import MAX_SPP
 from lts360.cli.usage import UsageError, _progress, _set_variant
+from lts360.folders import (
+    FRAME_FILE,
+    frame_file,
+    is_frame,
+    is_scan,
+    section_dir_name,
+    section_dirs,
+    write_scan_meta,
+)
+from lts360.simulator.render import MAX_SPP
 
 
 def cmd_objects(args) -> int:
@@ -246,12 +253,14 @@ def _scan_calibration_hint(path) -> None:
 def cmd_measure(args) -> int:
     from lts360.recon.model import load_calibration
     from lts360.recon.triangulation.acceptance import refusal, section_coverage
-    from lts360.recon.triangulation.band import (DEFAULT_FIXED_HALF_WIDTH_MM,
-                                                 DEFAULT_FIXED_RADIUS_MM)
+    from lts360.recon.triangulation.band import DEFAULT_FIXED_HALF_WIDTH_MM, DEFAULT_FIXED_RADIUS_MM
     from lts360.recon.triangulation.cloud import write_cloud
     from lts360.recon.triangulation.grid import CylGrid
-    from lts360.recon.triangulation.measure import (collect_sections, measure_sections,
-                                                    measure_sections_following)
+    from lts360.recon.triangulation.measure import (
+        collect_sections,
+        measure_sections,
+        measure_sections_following,
+    )
 
     if not 0.0 <= args.min_coverage <= 1.0:
         raise UsageError(f"--min-coverage: must be in [0, 1], got {args.min_coverage}")
@@ -456,10 +465,10 @@ def cmd_compensate(args) -> int:
 
     from lts360.geometry.fit import fit_circle
     from lts360.recon.calibration.compensation import joint_view_offsets, master_fit
+    from lts360.recon.images import read_image
     from lts360.recon.model import load_calibration, save_calibration
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.inverse import inverse_triangulate
-    from lts360.recon.images import read_image
     from lts360.recon.triangulation.measure import collect_sections
 
     if not args.radius_mm > 0 or not args.band_mm > 0 or args.band_mm >= args.radius_mm:

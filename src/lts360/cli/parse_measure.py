@@ -3,8 +3,6 @@
 
 from __future__ import annotations
 
-from lts360.cli.usage import VARIANT_HELP
-
 from lts360.cli.commands import (
     cmd_calibrate,
     cmd_compensate,
@@ -12,6 +10,7 @@ from lts360.cli.commands import (
     cmd_measure,
     cmd_score,
 )
+from lts360.cli.usage import VARIANT_HELP
 from lts360.inspect.scan import DEFAULT_LUMP_MM
 from lts360.inspect.uncertainty import DEFAULT_DRAWS
 from lts360.recon.calibration.compensation import (

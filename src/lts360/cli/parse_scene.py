@@ -3,9 +3,8 @@
 
 from __future__ import annotations
 
-from lts360.cli.usage import VARIANT_HELP
-
 from lts360.cli.commands import cmd_object, cmd_objects, cmd_render, cmd_rig
+from lts360.cli.usage import VARIANT_HELP
 from lts360.scenes.coverage import MAX_BOUNCES
 from lts360.simulator.integrator import MAX_SCATTER
 

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lts360.simulator.render import MAX_SPP
 from lts360.cli.usage import UsageError, _set_variant
+from lts360.simulator.render import MAX_SPP
 
 
 def _objects_arg(text: str | None, allowed, default) -> list[str]:
@@ -211,8 +211,11 @@ def _floats(text: str, option: str, *, positive: bool = False, nonneg: bool = Fa
 
 
 def cmd_study_line_speed(args) -> int:
-    from lts360.experiments.line_speed import (DEFAULT_OBJECTS, format_line_speed,
-                                               run_line_speed_study)
+    from lts360.experiments.line_speed import (
+        DEFAULT_OBJECTS,
+        format_line_speed,
+        run_line_speed_study,
+    )
     from lts360.scenes.objects import object_types
 
     common = _study_common(args)

@@ -51,8 +51,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lts360.design.backend import NUMPY_OPS
-from lts360.design.calib_fisher import (board_pose_information, camera_information,
-                                        laser_plane_parts, mirror_information)
+from lts360.design.calib_fisher import (
+    board_pose_information,
+    camera_information,
+    laser_plane_parts,
+    mirror_information,
+)
 from lts360.design.shares import CAMERA_NAMES, tangent_basis_np
 from lts360.design.smallmat import spd_inverse
 

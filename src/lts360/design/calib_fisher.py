@@ -11,8 +11,18 @@ for checks and in Dr.Jit inside the design model.
 
 from __future__ import annotations
 
-from lts360.design.smallmat import (block_sum_mat, dot_sum, gram, mat_add, mat_mul,
-                                    mat_sub, mat_transpose, spd_inverse, spd_solve, trace_mul)
+from lts360.design.smallmat import (
+    block_sum_mat,
+    dot_sum,
+    gram,
+    mat_add,
+    mat_mul,
+    mat_sub,
+    mat_transpose,
+    spd_inverse,
+    spd_solve,
+    trace_mul,
+)
 
 __all__ = ["project_jacobians", "pose_jacobian", "reflect", "reflect_jacobians", "plane_residual",
            "plane_residual_jacobian", "board_shift_jacobian", "line_noise_gain",

@@ -62,8 +62,13 @@ from lts360.design.camera import Distortion, line_stage, rig_geometry, view_stag
 from lts360.design.coverage import coverage_stage
 from lts360.design.elements import Elements
 from lts360.design.laser import laser_stage
-from lts360.design.noise import (CORRELATION_PX, SPECKLE_MODELS, exposure_reference,
-                                 noise_stage, pixel_speckle_contrast)
+from lts360.design.noise import (
+    CORRELATION_PX,
+    SPECKLE_MODELS,
+    exposure_reference,
+    noise_stage,
+    pixel_speckle_contrast,
+)
 from lts360.design.params import PARAMETERS, DesignError, DesignSpace
 from lts360.design.shares import CalibrationCovariance
 from lts360.scenes.coverage import mirror_sequences, view_name

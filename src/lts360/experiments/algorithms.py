@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lts360.folders import is_frame, read_frame_meta
 from lts360.experiments.runner import Trial, TrialOutput, grid_params, plan_trials, run_study
+from lts360.folders import is_frame, read_frame_meta
 
 __all__ = ["METHODS", "DEFAULT_OBJECTS", "algorithms_trial", "run_algorithms_study",
            "format_algorithms"]

@@ -21,7 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
-from lts360.recon.calibration.from_images import RigCalibrationResult, calibrate_rig, read_calibration_images
+from lts360.recon.calibration.from_images import (
+    RigCalibrationResult,
+    calibrate_rig,
+    read_calibration_images,
+)
 from lts360.recon.model import Calibration, calibration_from_frame_truth, save_calibration
 
 __all__ = ["run_calibrate", "calibration_accuracy", "calibration_report", "plot_fig8",

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from lts360.folders import frame_file, read_frame_meta
 from lts360.experiments.figures import plot_rig, plot_sections
 from lts360.experiments.report import format_coverage, format_rig
+from lts360.folders import frame_file, read_frame_meta
 from lts360.scenes.coverage import coverage
 from lts360.scenes.objects import build_object, object_types
 from lts360.scenes.rig_io import load_rig, rig_to_toml

@@ -236,8 +236,8 @@ def _simulate_shares(rig, *, draws: int, spp: int, seed: int, placement_mm: floa
         THETA_STEP_DEG,
     )
     from lts360.experiments.design_space.trial import _measure_draw
-    from lts360.recon.model import calibration_from_frame_truth
     from lts360.recon.calibration.uncertainty import sample_calibration
+    from lts360.recon.model import calibration_from_frame_truth
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.scenes.objects import build_object
     from lts360.simulator.frame import sensor_image, simulate_frame

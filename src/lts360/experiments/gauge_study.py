@@ -303,15 +303,14 @@ def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str,
     store their offsets in a copy of the calibration."""
     import dataclasses
 
-    from lts360.simulator.render import ensure_variant
-
-    from lts360.recon.model import load_calibration, save_calibration
     from lts360.recon.calibration.compensation import joint_view_offsets
-    from lts360.recon.triangulation.inverse import inverse_triangulate
+    from lts360.recon.model import load_calibration, save_calibration
     from lts360.recon.triangulation.grid import CylGrid
+    from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.scenes.objects import build_object
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import simulate_frame
+    from lts360.simulator.render import ensure_variant
 
     if not 1 <= int(shots) <= 100:
         raise ValueError(f"compensation shots must be in [1, 100], got {shots}")

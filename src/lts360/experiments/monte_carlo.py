@@ -67,10 +67,15 @@ from pathlib import Path
 
 import numpy as np
 
-from lts360.folders import is_frame, read_frame_meta
-from lts360.experiments.gauge_study import (DEFAULT_PLACEMENT_MM, DELTA_T_K, GAUGE_DIAMETER_MM,
-                                            STEEL_ALPHA_PER_K, gauge_placements)
+from lts360.experiments.gauge_study import (
+    DEFAULT_PLACEMENT_MM,
+    DELTA_T_K,
+    GAUGE_DIAMETER_MM,
+    STEEL_ALPHA_PER_K,
+    gauge_placements,
+)
 from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study
+from lts360.folders import is_frame, read_frame_meta
 
 __all__ = ["INPUTS", "mc_trial", "run_monte_carlo_study", "coverage_interval",
            "adaptive_stable", "dorsch_speckle_limit_um", "speckle_point_prediction_um",
@@ -250,8 +255,8 @@ def mc_trial(trial: Trial) -> TrialOutput:
     from types import SimpleNamespace
 
     from lts360.geometry.fit import fit_circle
-    from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.recon.calibration.uncertainty import sample_calibration
+    from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import sensor_image
 

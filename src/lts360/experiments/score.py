@@ -13,15 +13,14 @@ Errors are signed: positive outside the true surface.  Two truths: the analytic 
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from lts360.folders import first_frame_meta
 from lts360.geometry.fit import fit_circle
 from lts360.recon.triangulation.cloud import VIEW_NAMES, Cloud
 from lts360.recon.triangulation.reject import rejection_counts
-from lts360.scenes.objects import SceneObject
 from lts360.scenes.frame_truth import load_truth
+from lts360.scenes.objects import SceneObject
 
 __all__ = ["true_radius_band", "load_truth", "load_rig_truth", "signed_mesh_distance",
            "score_cloud", "error_stats", "measurable"]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lts360.geometry._checks import as_points, as_matrix
+from lts360.geometry._checks import as_matrix, as_points
 
 __all__ = [
     "distort_normalized",

@@ -13,13 +13,23 @@ import numpy as np
 
 from lts360.inspect import scan as scan_mod
 from lts360.inspect.circles import REFERENCES, least_squares_circle
-from lts360.inspect.extremes import (CIRCLE_SECTIONS, DEFAULT_EXTREME_DRAWS, FILTER_UPR_RANGE,
-                                     default_upr, extreme_noise)
+from lts360.inspect.extremes import (
+    CIRCLE_SECTIONS,
+    DEFAULT_EXTREME_DRAWS,
+    FILTER_UPR_RANGE,
+    default_upr,
+    extreme_noise,
+)
 from lts360.inspect.nominal import Nominal, ToleranceBand, deviations, place_nominal
 from lts360.inspect.profile import DEFAULT_BIN_DEG, DEFAULT_GAP_DEG, valid_mask
 from lts360.inspect.section import MIN_POINTS, SectionResult, analyse_section
-from lts360.inspect.uncertainty import (DEFAULT_DRAWS, calibration_u, combine,
-                                        correlated_mean_u, scatter_u)
+from lts360.inspect.uncertainty import (
+    DEFAULT_DRAWS,
+    calibration_u,
+    combine,
+    correlated_mean_u,
+    scatter_u,
+)
 from lts360.recon.triangulation.cloud import VIEW_NAMES, Cloud
 
 __all__ = ["Inspection", "inspect_cloud", "NoValidPoints"]

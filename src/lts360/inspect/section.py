@@ -16,10 +16,18 @@ import numpy as np
 from lts360.inspect.circles import ReferenceCircle, least_squares_circle, reference_circles
 from lts360.inspect.diameters import Diameters, diameters
 from lts360.inspect.harmonics import DEFAULT_MAX_ORDER, Harmonics, fit_harmonics
-from lts360.inspect.profile import (DEFAULT_BIN_DEG, DEFAULT_GAP_DEG, BinnedProfile, Gap,
-                                    bin_profile, coverage_deg, gaps, gaussian_filter,
-                                    interp_profile,
-                                    uniform_profile)
+from lts360.inspect.profile import (
+    DEFAULT_BIN_DEG,
+    DEFAULT_GAP_DEG,
+    BinnedProfile,
+    Gap,
+    bin_profile,
+    coverage_deg,
+    gaps,
+    gaussian_filter,
+    interp_profile,
+    uniform_profile,
+)
 
 __all__ = ["SectionResult", "analyse_section", "MIN_POINTS"]
 

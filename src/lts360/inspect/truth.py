@@ -10,7 +10,6 @@ section, so the true ovality, roundness and lobes are computed by the same defin
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from lts360.scenes.frame_truth import load_truth

@@ -18,8 +18,12 @@ a real calibration file.  Import the submodules directly; the most used names ar
 from lts360.recon.model import Calibration, MirrorPlane, load_calibration, save_calibration
 from lts360.recon.triangulation.cloud import Cloud, read_cloud, write_cloud
 from lts360.recon.triangulation.grid import CylGrid
-from lts360.recon.triangulation.inverse import (InverseResult, estimate_view_offsets,
-                                               inverse_triangulate, plan_inverse)
+from lts360.recon.triangulation.inverse import (
+    InverseResult,
+    estimate_view_offsets,
+    inverse_triangulate,
+    plan_inverse,
+)
 from lts360.recon.triangulation.peaks import Quality, detect_peaks
 
 __all__ = ["Calibration", "MirrorPlane", "load_calibration", "save_calibration", "Cloud",

@@ -4,7 +4,6 @@ threshold and saturation level (full scale of the image's type)."""
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from lts360.folders import read_image

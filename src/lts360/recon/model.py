@@ -16,7 +16,6 @@ This module never imports the simulator: it reads that file as plain JSON.
 from __future__ import annotations
 
 import dataclasses
-
 import json
 import math
 import os

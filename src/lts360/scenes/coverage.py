@@ -25,8 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lts360.geometry.camera import project_points
 from lts360.geometry import mirror_path
+from lts360.geometry.camera import project_points
 from lts360.geometry.mirror_path import PathMirror, rectangle_extent
 from lts360.scenes.rig import Mirror, Rig
 

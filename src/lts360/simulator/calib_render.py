@@ -29,9 +29,9 @@ import numpy as np
 
 from lts360.scenes.calib_plan import BoardShot
 from lts360.scenes.rig import Rig
+from lts360.simulator.board_window import board_pixels
 from lts360.simulator.frame import sensor_image
 from lts360.simulator.io import rig_truth, write_json, write_png
-from lts360.simulator.board_window import board_pixels
 from lts360.simulator.render import RenderResult, render_pixels, render_radiance
 from lts360.simulator.scene import SceneSpec
 

@@ -22,9 +22,9 @@ from lts360.scenes.objects.base import SceneObject
 from lts360.scenes.objects.part import copy_part, part_truth
 from lts360.scenes.rig import Rig
 from lts360.simulator.io import rig_truth, write_exr, write_json, write_png
+from lts360.simulator.materials import material_to_bsdf
 from lts360.simulator.render import RenderResult, render_radiance
 from lts360.simulator.scene import SceneSpec
-from lts360.simulator.materials import material_to_bsdf
 from lts360.simulator.support import SUPPORT_METHODS, PixelSupport
 
 __all__ = ["DEFAULT_SPP", "NOISE_MODES", "AMBIENT_SPP", "Frame", "simulate_frame", "render_frame",

@@ -25,9 +25,9 @@ import time
 
 import numpy as np
 
+from lts360.geometry import project_points
 from lts360.geometry.camera import scale_intrinsics
 from lts360.geometry.mirror import mirror_matrix
-from lts360.geometry import project_points
 from lts360.scenes.motion import Acquisition
 from lts360.scenes.objects.base import SceneObject
 from lts360.scenes.objects.part import part_truth

@@ -10,8 +10,8 @@ from scipy.spatial.transform import Rotation
 
 from lts360.geometry.camera import project_camera_points
 from lts360.recon.calibration import board_model
-from lts360.recon.calibration.board_model import refine_board_pose
 from lts360.recon.calibration.board import BoardGeometry
+from lts360.recon.calibration.board_model import refine_board_pose
 
 K = np.array([[1509.4, 0.0, 160.0], [0.0, 1509.4, 160.0], [0.0, 0.0, 1.0]])
 GEO = BoardGeometry((6, 5), 2.0)

@@ -5,8 +5,14 @@ import numpy as np
 import pytest
 
 from lts360.geometry import project_points
-from lts360.recon.model import (Calibration, MirrorPlane, calibration_to_dict,
-                                      load_calibration, make_T_cam_meas, save_calibration)
+from lts360.recon.model import (
+    Calibration,
+    MirrorPlane,
+    calibration_to_dict,
+    load_calibration,
+    make_T_cam_meas,
+    save_calibration,
+)
 from lts360.recon.triangulation.views import get_views, project_meas_points
 from lts360.scenes.rig_io import load_rig
 from lts360.simulator.io import rig_truth, write_json

@@ -19,8 +19,7 @@ import pytest
 cv2 = pytest.importorskip("cv2", reason="calibration needs OpenCV")
 
 from lts360.geometry.camera import project_points  # noqa: E402
-from lts360.recon.calibration.camera import (BoardGeometry, calibrate_camera,  # noqa: E402
-                                             intrinsics_jackknife)
+from lts360.recon.calibration.camera import BoardGeometry, calibrate_camera, intrinsics_jackknife  # noqa: E402
 from lts360.scenes.calib_plan import plan_calibration  # noqa: E402
 from lts360.scenes.rig_io import load_rig  # noqa: E402
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from lts360.recon.calibration.from_images import measurement_frame_from_mirrors
-from lts360.recon.model import calibration_from_frame_truth
 from lts360.recon.calibration.laser_plane import LaserLine, fit_laser_plane
+from lts360.recon.model import calibration_from_frame_truth
 
 
 def _line(p0, direction, n_pts=50):

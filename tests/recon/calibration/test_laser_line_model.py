@@ -8,8 +8,8 @@ import pytest
 from scipy import ndimage
 
 from lts360.recon.calibration.board import BoardGeometry
-from lts360.recon.calibration.laser_plane import laser_line_points
 from lts360.recon.calibration.laser_line_model import fit_line_on_board
+from lts360.recon.calibration.laser_plane import laser_line_points
 
 pytest.importorskip("cv2")
 

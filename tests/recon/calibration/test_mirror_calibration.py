@@ -121,8 +121,11 @@ def test_an_image_with_wrong_virtual_corners_is_discarded():
     second fit that they had already pulled: here the plane 375 µm off and the other images
     at 0.05–0.07 px RMS (on the f/8 shots 0.045 against 0.008 px without it).  Synthetic,
     0.01 px corner noise."""
-    from lts360.recon.calibration.mirrors import (MirrorObservation, refine_mirror,
-                                                 robust_refine_mirror)
+    from lts360.recon.calibration.mirrors import (
+        MirrorObservation,
+        refine_mirror,
+        robust_refine_mirror,
+    )
 
     obs, geo, K, n_c, d_c = _synthetic_mirror_shots(noise_px=0.01)
     clean = refine_mirror(obs, geo, K, np.zeros(5))

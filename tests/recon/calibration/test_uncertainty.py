@@ -10,9 +10,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from lts360.geometry.fit import fit_plane
+from lts360.recon.calibration.uncertainty import (
+    jackknife_covariance,
+    perturb_plane,
+    plane_covariance,
+    plane_offset_abd,
+    sample_calibration,
+    tangent_basis,
+)
 from lts360.recon.model import calibration_from_frame_truth
-from lts360.recon.calibration.uncertainty import (jackknife_covariance, perturb_plane, plane_covariance,
-                                      plane_offset_abd, sample_calibration, tangent_basis)
 
 unit = st.tuples(*[st.floats(-1, 1, allow_nan=False)] * 3).filter(
     lambda v: np.linalg.norm(v) > 1e-3)

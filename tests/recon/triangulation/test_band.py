@@ -9,8 +9,12 @@ import pytest
 from test_inverse import synthesize_section
 
 from lts360.recon.model import calibration_from_dict
-from lts360.recon.triangulation.band import (BandSearch, follow_profile, measurable_radii,
-                                             profile_windows)
+from lts360.recon.triangulation.band import (
+    BandSearch,
+    follow_profile,
+    measurable_radii,
+    profile_windows,
+)
 from lts360.recon.triangulation.grid import CylGrid
 from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
 from lts360.recon.triangulation.measure import make_runner

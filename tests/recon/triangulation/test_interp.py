@@ -1,9 +1,15 @@
 import numpy as np
 import pytest
-from hypothesis import given, strategies as st
+from hypothesis import given
+from hypothesis import strategies as st
 
-from lts360.recon.triangulation.interp import (CubicSampler, bspline_weights, keys_kernel, keys_weights,
-                                 sample_cubic)
+from lts360.recon.triangulation.interp import (
+    CubicSampler,
+    bspline_weights,
+    keys_kernel,
+    keys_weights,
+    sample_cubic,
+)
 
 H, W = 40, 56
 

@@ -11,8 +11,12 @@ from scipy.spatial import cKDTree
 from lts360.geometry import fit_circle, project_points
 from lts360.recon.model import calibration_from_dict
 from lts360.recon.triangulation.grid import CylGrid
-from lts360.recon.triangulation.inverse import (_shift_on_rays, estimate_view_offsets, inverse_triangulate,
-                                  plan_inverse)
+from lts360.recon.triangulation.inverse import (
+    _shift_on_rays,
+    estimate_view_offsets,
+    inverse_triangulate,
+    plan_inverse,
+)
 from lts360.recon.triangulation.peaks import Quality
 from lts360.scenes.coverage import coverage
 from lts360.scenes.rig_io import load_rig

@@ -1,8 +1,16 @@
 import numpy as np
 import pytest
-from hypothesis import given, strategies as st
+from hypothesis import given
+from hypothesis import strategies as st
 
-from lts360.recon.triangulation.peaks import Quality, centroid, detect_peaks, gauss, main_run, steger
+from lts360.recon.triangulation.peaks import (
+    Quality,
+    centroid,
+    detect_peaks,
+    gauss,
+    main_run,
+    steger,
+)
 
 STEP_MM = 0.005                       # the standard radial step (5 µm)
 R_MM = 8.0 + np.arange(801) * STEP_MM

@@ -4,8 +4,12 @@ criterion: a line that fades inside its window, a notch, a round section off the
 import numpy as np
 import pytest
 
-from lts360.recon.triangulation.reject import (fading_points, notch_depth, rejection_counts,
-                                               section_profile)
+from lts360.recon.triangulation.reject import (
+    fading_points,
+    notch_depth,
+    rejection_counts,
+    section_profile,
+)
 
 TH = np.radians(np.arange(-180.0, 180.0, 0.1))
 STEP = np.radians(0.1)
@@ -83,8 +87,12 @@ def test_bad_arguments():
 
 
 def test_the_cloud_header_carries_the_rejections(tmp_path):
-    from lts360.recon.triangulation.cloud import (Cloud, read_cloud, read_cloud_rejections,
-                                                  write_cloud)
+    from lts360.recon.triangulation.cloud import (
+        Cloud,
+        read_cloud,
+        read_cloud_rejections,
+        write_cloud,
+    )
     from lts360.recon.triangulation.peaks import Quality
 
     n = 4

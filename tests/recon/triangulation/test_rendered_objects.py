@@ -50,8 +50,7 @@ def test_object_section_within_its_tolerance(name):
     if "llvm_ad_mono" not in mi.variants():
         pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
     mi.set_variant("llvm_ad_mono")
-    from lts360.experiments.score import true_radius_band
-    from lts360.experiments.score import score_cloud
+    from lts360.experiments.score import score_cloud, true_radius_band
     from lts360.recon.model import calibration_from_frame_truth
     from lts360.recon.triangulation.grid import CylGrid
     from lts360.recon.triangulation.inverse import inverse_triangulate

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from meshcheck import _wrap, face_points, outermost_hit_radius, radial_error  # noqa: E402
 from scipy.integrate import quad
 
 import lts360.scenes.objects.cable as cb
 from lts360.scenes.objects.base import Placement
 from lts360.scenes.objects.catalog import build_object, get_object_type, parse_spec
-from meshcheck import _wrap, face_points, outermost_hit_radius, radial_error  # noqa: E402
 
 P = cb.CableParams
 #: Vertices are computed from r(θ, z) directly: only float64 rounding separates them.

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from meshcheck import face_points, outermost_hit_radius, radial_error  # noqa: E402
 
 import lts360.scenes.objects.cube as cu
 from lts360.scenes.objects.base import Placement
 from lts360.scenes.objects.catalog import build_object, parse_spec
-from meshcheck import face_points, outermost_hit_radius, radial_error  # noqa: E402
 
 P = cu.CubeParams
 #: The mesh is exact (planar faces through exact vertices): only float64 rounding remains.

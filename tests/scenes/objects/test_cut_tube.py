@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
+from meshcheck import face_points, outermost_hit_radius, radial_error  # noqa: E402
 
 import lts360.scenes.objects.cut_tube as ct
 from lts360.scenes.objects.base import Placement
 from lts360.scenes.objects.catalog import build_object, parse_spec
-from meshcheck import face_points, outermost_hit_radius, radial_error  # noqa: E402
 
 P = ct.CutTubeParams
 #: Vertices of the tube are computed from the radius directly, those of the cut by Manifold in

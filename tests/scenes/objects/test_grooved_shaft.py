@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from meshcheck import _wrap, face_points, outermost_hit_radius, radial_error  # noqa: E402
 from scipy.integrate import quad
 
 import lts360.scenes.objects.grooved_shaft as gs
 from lts360.scenes.objects.base import Placement
 from lts360.scenes.objects.catalog import build_object, parse_spec
-from meshcheck import _wrap, face_points, outermost_hit_radius, radial_error  # noqa: E402
 
 P = gs.GroovedShaftParams
 #: Vertices are computed from r(θ, z) directly: only float64 rounding separates them.

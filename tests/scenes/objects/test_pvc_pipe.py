@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
+from meshcheck import face_points, outermost_hit_radius, radial_error  # noqa: E402
 from scipy.special import erf, ive
 
 import lts360.scenes.objects.pvc_pipe as pvc
 from lts360.scenes.objects.base import Placement
 from lts360.scenes.objects.catalog import build_object, parse_spec
-from meshcheck import face_points, outermost_hit_radius, radial_error  # noqa: E402
 
 P = pvc.PvcPipeParams
 #: Vertices are computed from r(θ, z) directly: only float64 rounding separates them.

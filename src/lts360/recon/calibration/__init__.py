@@ -14,7 +14,6 @@ re-exported here.  Never imports :mod:`lts360.simulator`, :mod:`lts360.scenes` o
 triangulation part: it runs on real images.
 """
 
-from lts360.recon.model import (Calibration, MirrorPlane, load_calibration,
-                                            save_calibration)
+from lts360.recon.model import Calibration, MirrorPlane, load_calibration, save_calibration
 
 __all__ = ["Calibration", "MirrorPlane", "load_calibration", "save_calibration"]

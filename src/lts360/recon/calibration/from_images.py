@@ -39,17 +39,31 @@ from pathlib import Path
 
 import numpy as np
 
-from lts360.recon.model import Calibration, MirrorPlane, make_T_cam_meas
 from lts360.recon.calibration.board import BoardGeometry
 from lts360.recon.calibration.camera import CameraCalibration, calibrate_camera
-from lts360.recon.calibration.laser_plane import (LaserLine, LaserPlaneEstimate, board_pose,
-                                            board_pose_in_mirror,
-                                            fit_laser_plane, laser_line_points)
+from lts360.recon.calibration.laser_plane import (
+    LaserLine,
+    LaserPlaneEstimate,
+    board_pose,
+    board_pose_in_mirror,
+    fit_laser_plane,
+    laser_line_points,
+)
+from lts360.recon.calibration.mirrors import (
+    MirrorEstimate,
+    MirrorObservation,
+    detect_real_and_virtual,
+    mirror_from_midpoints,
+    refine_mirror,
+    robust_refine_mirror,
+)
+from lts360.recon.calibration.uncertainty import (
+    CAMERA_STD_NAMES,
+    jackknife_covariance,
+    plane_offset_abd,
+)
 from lts360.recon.images import read_image as _read
-from lts360.recon.calibration.mirrors import (MirrorEstimate, MirrorObservation,
-                                             detect_real_and_virtual, mirror_from_midpoints,
-                                             refine_mirror, robust_refine_mirror)
-from lts360.recon.calibration.uncertainty import (CAMERA_STD_NAMES, jackknife_covariance, plane_offset_abd)
+from lts360.recon.model import Calibration, MirrorPlane, make_T_cam_meas
 
 __all__ = ["CalibrationImages", "read_calibration_images", "calibrate_rig",
            "measurement_frame_from_mirrors", "RigCalibrationResult", "select_laser_lines"]

@@ -42,8 +42,12 @@ from lts360.recon.model import Calibration
 from lts360.recon.triangulation.grid import CylGrid
 from lts360.recon.triangulation.inverse import InversePlan, InverseResult, plan_inverse
 from lts360.recon.triangulation.peaks import Quality
-from lts360.recon.triangulation.views import (DEFAULT_MAX_INCIDENCE_DEG, DIRECT, get_views,
-                                              view_windows)
+from lts360.recon.triangulation.views import (
+    DEFAULT_MAX_INCIDENCE_DEG,
+    DIRECT,
+    get_views,
+    view_windows,
+)
 
 __all__ = ["BandSearch", "Profile", "follow_profile", "measurable_radii", "profile_windows",
            "self_occluded", "hidden_rows",

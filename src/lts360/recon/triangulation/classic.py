@@ -15,7 +15,6 @@ so both are scored the same way.
 
 from __future__ import annotations
 
-
 import numpy as np
 from scipy import ndimage
 

@@ -42,13 +42,23 @@ from __future__ import annotations
 
 import numpy as np
 
-from lts360.recon.triangulation.interp import prefilter
 from lts360.recon.images import default_saturation, default_threshold
-from lts360.recon.triangulation.inverse import (DEFAULT_ACCEPT, InversePlan, InverseResult,
-                                               assemble_view, compensation_of)
-from lts360.recon.triangulation.peaks import (DEFAULT_MAX_PLATEAU_MM, DEFAULT_SECOND_PEAK_FRACTION,
-                                              SATURATION_RTOL, PeakResult, Quality,
-                                              plateau_samples)
+from lts360.recon.triangulation.interp import prefilter
+from lts360.recon.triangulation.inverse import (
+    DEFAULT_ACCEPT,
+    InversePlan,
+    InverseResult,
+    assemble_view,
+    compensation_of,
+)
+from lts360.recon.triangulation.peaks import (
+    DEFAULT_MAX_PLATEAU_MM,
+    DEFAULT_SECOND_PEAK_FRACTION,
+    SATURATION_RTOL,
+    PeakResult,
+    Quality,
+    plateau_samples,
+)
 
 __all__ = ["FastInverse", "window_layout"]
 

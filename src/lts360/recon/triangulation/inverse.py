@@ -36,10 +36,16 @@ from lts360.recon.model import Calibration
 from lts360.recon.triangulation.grid import CylGrid
 from lts360.recon.triangulation.interp import INTERPOLATIONS, CubicSampler, sample_cubic
 from lts360.recon.triangulation.peaks import PeakResult, Quality, detect_peaks
+from lts360.recon.triangulation.views import (
+    DEFAULT_MAX_INCIDENCE_DEG,
+    DIRECT,
+    View,
+    get_views,
+    project_meas_points,
+    seen_through_mirrors,
+    view_windows,
+)
 from lts360.recon.view_points import raw_view_points
-from lts360.recon.triangulation.views import (DEFAULT_MAX_INCIDENCE_DEG, DIRECT, View, get_views,
-                                              project_meas_points, seen_through_mirrors,
-                                              view_windows)
 
 __all__ = ["ViewPlan", "InversePlan", "ViewResult", "FusedCloud", "InverseResult",
            "plan_inverse", "plan_pixels", "project_grid", "sample_profiles", "assemble_view", "compensation_of",

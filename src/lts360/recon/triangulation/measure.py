@@ -19,8 +19,12 @@ from lts360.recon.images import read_image
 from lts360.recon.model import Calibration
 from lts360.recon.triangulation.cloud import VIEW_CODES, Cloud
 from lts360.recon.triangulation.grid import DEFAULT_R_STEP_MM, DEFAULT_THETA_STEP_DEG, CylGrid
-from lts360.recon.triangulation.inverse import (InversePlan, InverseResult, inverse_triangulate,
-                                                plan_inverse)
+from lts360.recon.triangulation.inverse import (
+    InversePlan,
+    InverseResult,
+    inverse_triangulate,
+    plan_inverse,
+)
 from lts360.recon.triangulation.peaks import Quality
 
 __all__ = ["RowTiming", "Section", "collect_sections", "measure_sections", "measure_sections_following",
@@ -168,8 +172,11 @@ class _Rejecting:
         self.last_raw = None
 
     def __call__(self, img):
-        from lts360.recon.triangulation.reject import (mark_hidden, reject_discontinuous,
-                                                       reject_spurious)
+        from lts360.recon.triangulation.reject import (
+            mark_hidden,
+            reject_discontinuous,
+            reject_spurious,
+        )
 
         raw = self.measure(img)
         self.last_raw = raw if not self.hidden else mark_hidden(raw, self.hidden)
@@ -466,8 +473,13 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
     import time
 
     from lts360.recon.model import shift_origin
-    from lts360.recon.triangulation.band import (DEFAULT_FOLLOW_HALF_WIDTH_MM, BandSearch,
-                                                 Profile, hidden_rows, profile_windows)
+    from lts360.recon.triangulation.band import (
+        DEFAULT_FOLLOW_HALF_WIDTH_MM,
+        BandSearch,
+        Profile,
+        hidden_rows,
+        profile_windows,
+    )
 
     w = DEFAULT_FOLLOW_HALF_WIDTH_MM if half_width_mm is None else float(half_width_mm)
     if not w > 0:

@@ -22,8 +22,13 @@ from lts360.scenes.objects._params import check_less, check_range
 from lts360.scenes.objects.base import Placement, SceneObject
 from lts360.scenes.objects.mesher import n_theta_for_tolerance
 from lts360.scenes.objects.registry import ObjectType, register
-from lts360.scenes.objects.zoned import (MESH_SAFETY, axial_step_mm, chord_radius_mm,
-                                         zone_half_mm, zoned_star_object)
+from lts360.scenes.objects.zoned import (
+    MESH_SAFETY,
+    axial_step_mm,
+    chord_radius_mm,
+    zone_half_mm,
+    zoned_star_object,
+)
 
 NAME = "pvc-pipe"
 #: The paper's scan of this object (Fig. 11).
