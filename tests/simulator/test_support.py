@@ -86,7 +86,7 @@ def test_support_frame_has_the_full_frames_statistics(variant, rig, noise):
     obj = build_object("plug-gauge:x=0.4")
     # The exposure auto-exposure picks here (the brightest stripe pixels at 80 % of full scale).
     kw = dict(spp=16, seed=2, noise=noise, scale=0.5, exposure_time_s=2.75e-4)
-    band = simulate_frame(rig, obj, **kw)
+    band = simulate_frame(rig, obj, support="geometric", **kw)
     full = simulate_frame(rig, obj, support="full", **kw)
     assert band.truth["render"]["support"]["method"] == "geometric"
     assert full.truth["render"]["support"]["method"] == "full"
@@ -122,7 +122,7 @@ def test_window_and_support_intersect(variant, rig):
 
     obj = build_object("plug-gauge")
     px = window_pixels([(0, 0, 320, 128)])
-    f = simulate_frame(rig, obj, spp=4, seed=1, scale=0.25, pixels_xy=px)
+    f = simulate_frame(rig, obj, spp=4, seed=1, scale=0.25, pixels_xy=px, support="geometric")
     g = simulate_frame(rig, obj, spp=4, seed=1, scale=0.25, pixels_xy=px, support="full")
     assert 0 < f.truth["render"]["support"]["pixels"] < g.truth["render"]["support"]["pixels"]
     assert g.truth["render"]["support"]["pixels"] == 320 * 128
@@ -136,7 +136,7 @@ def test_ambient_fills_the_pixels_outside_the_support(variant, rig):
     from lts360.simulator.support import geometric_support
 
     obj = build_object("plug-gauge")
-    band = simulate_frame(rig, obj, spp=4, seed=1, scale=0.25, ambient="dim",
+    band = simulate_frame(rig, obj, spp=4, seed=1, scale=0.25, ambient="dim", support="geometric",
                           exposure_time_s=2e-3)
     full = simulate_frame(rig, obj, spp=4, seed=1, scale=0.25, ambient="dim", support="full",
                           exposure_time_s=2e-3)
@@ -220,14 +220,14 @@ def test_band_frame_and_full_frame_measure_the_same_radius(variant, rig):
     assert abs(a.mean() - b.mean()) < 3 * se + 1e-4
 
 
-def test_cli_renders_the_support_by_default_and_the_full_frame_on_request(variant, tmp_path):
-    """``lts360 render`` renders the support; ``--full-frame`` every pixel; a scan builds its
-    scene once (each section moves the object)."""
+def test_cli_renders_the_full_frame_by_default_and_the_support_on_request(variant, tmp_path):
+    """``lts360 render`` renders every pixel; ``--support geometric`` the support; a scan builds
+    its scene once (each section moves the object)."""
     import json
 
     from lts360.cli import main
 
-    for extra, method in (([], "geometric"), (["--full-frame"], "full")):
+    for extra, method in ((["--support", "geometric"], "geometric"), ([], "full")):
         out = tmp_path / method
         assert main(["render", "--object", "plug-gauge", "--out", str(out), "--scale", "0.125",
                      "--spp", "1", "--sections", "2", "--pitch-mm", "0.5"] + extra) == 0

@@ -120,7 +120,7 @@ def cmd_render(args) -> int:
               thin_lens=not args.pinhole, background_z_mm=args.background_z_mm,
               exposure_time_s=None if args.exposure_us is None else args.exposure_us * 1e-6,
               exposure_fraction=args.exposure_fraction,
-              support="full" if args.full_frame else args.support)
+              support=args.support)
     if acq is not None:
         return _render_moving(args, rig, obj, acq, out, variant)
     if args.sections == 1:
