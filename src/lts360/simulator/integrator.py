@@ -42,6 +42,7 @@ speckle can multiply only the coherent part.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -60,11 +61,13 @@ MAX_SCATTER = 3
 MIRROR_STEP_MM = 1e-2
 
 MM2_PER_M2 = 1.0e6
-_SHADOW_EPS = 1e-4
+_SHADOW_EPS = 1e-4  # relative shortening of shadow segments (segments are 10–300 mm long)
 #: Where a shadow ray restarts in front of a mirror it met (mm): clear of the mirror's shape in
 #: float32 at ~100 mm coordinates.
 SHADOW_CLEARANCE_MM = 1e-4
-_GAUSS_CUT = 16.1  # exp(-16.1) = 1e-7  # relative shortening of shadow segments (segments are 10–300 mm long)
+#: Normalisation of the Gaussian profile across the sheet: ∫ sqrt(2/π)/w exp(-2h²/w²) dh = 1.
+_GAUSS_NORM = math.sqrt(2.0 / math.pi)
+_GAUSS_CUT = 16.1  # exp(-16.1) = 1e-7
 
 
 @dataclass(frozen=True)
@@ -141,6 +144,50 @@ def _sequences(n_mirrors: int, max_bounces: int) -> list[tuple[int, ...]]:
     return mirror_sequences(tuple(range(n_mirrors)), max_bounces)
 
 
+@dataclass(frozen=True)
+class _Setup:
+    """What the integrator reads while it renders, fixed when it is built
+    (:func:`make_integrator`'s parameters and what follows from them)."""
+
+    laser: LaserParams
+    mirrors: tuple[MirrorParams, ...]
+    max_bounces: int
+    ambient: bool
+    clearance_mm: float
+    max_scatter: int
+    #: ``(sequence, virtual laser origin (mm), product of the mirrors' reflectances)``, one
+    #: per mirror sequence the laser light can take (method of images).
+    virtual: tuple[tuple[tuple[int, ...], tuple[float, float, float], float], ...]
+    #: The sheet's in-plane axis normal to its direction (``normal × direction``).
+    e2: tuple[float, float, float]
+    #: Normalisation of the fan profile over its angle (1/rad).
+    fan_norm: float
+    #: A scalar Mitsuba variant (one sample at a time: Python bools for masks).
+    scalar: bool
+
+
+def _build_setup(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, max_bounces: int,
+                 ambient: bool, clearance_mm: float, max_scatter: int, scalar: bool) -> _Setup:
+    O = np.asarray(laser.origin_mm)
+    # Virtual lasers: light that met mirrors a then b appears to come from T_b T_a O.
+    virtual = []
+    for seq in _sequences(len(mirrors), max_bounces):
+        p = O.copy()
+        for k in seq:
+            p = mirrors[k].reflect(p)
+        refl = float(np.prod([mirrors[k].reflectance for k in seq])) if seq else 1.0
+        virtual.append((seq, tuple(map(float, p)), refl))
+    e2 = np.cross(np.asarray(laser.normal), np.asarray(laser.direction))
+    half_fan = laser.half_fan_rad
+    if laser.fan_profile == "flat":
+        fan_norm = 1.0 / (2.0 * half_fan)
+    else:  # Gaussian in angle, 1/e² at the fan edge
+        fan_norm = 1.0 / (half_fan * math.sqrt(math.pi / 2.0))
+    return _Setup(laser=laser, mirrors=tuple(mirrors), max_bounces=max_bounces, ambient=ambient,
+                  clearance_mm=clearance_mm, max_scatter=max_scatter, virtual=tuple(virtual),
+                  e2=tuple(map(float, e2)), fan_norm=fan_norm, scalar=scalar)
+
+
 def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, max_bounces: int = 2,
                     ambient: bool = False, clearance_mm: float = SHADOW_CLEARANCE_MM,
                     max_scatter: int = 0):
@@ -173,210 +220,250 @@ def make_integrator(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, ma
     if not 0 < clearance_mm <= 1.0:
         raise ValueError(f"clearance_mm must be in (0, 1], got {clearance_mm}")
     check_max_scatter(max_scatter)
-    seqs = _sequences(len(mirrors), max_bounces)
-    O = np.asarray(laser.origin_mm)
-    n_l = np.asarray(laser.normal)
-    dir_l = np.asarray(laser.direction)
-    e2_l = np.cross(n_l, dir_l)
-    # Virtual lasers: light that met mirrors a then b appears to come from T_b T_a O.
-    virtual = []
-    for seq in seqs:
-        p = O.copy()
-        for k in seq:
-            p = mirrors[k].reflect(p)
-        refl = float(np.prod([mirrors[k].reflectance for k in seq])) if seq else 1.0
-        virtual.append((seq, p, refl))
+    setup = _build_setup(laser, mirrors, max_bounces=max_bounces, ambient=ambient,
+                         clearance_mm=clearance_mm, max_scatter=max_scatter,
+                         scalar=not dr.is_array_v(mi.Float))
+    return _integrator_class(mi.variant())(setup)
 
-    def V(v):
-        return mi.Vector3f(float(v[0]), float(v[1]), float(v[2]))
 
-    def P(v):
-        return mi.Point3f(float(v[0]), float(v[1]), float(v[2]))
-
-    def reflect_point(p, m: MirrorParams):
-        n = V(m.normal)
-        return p - 2.0 * (dr.dot(p, n) - m.d_mm) * n
-
-    scalar = not dr.is_array_v(mi.Float)  # scalar_* variants: one sample at a time
-
-    def NOT(mask):  # ``~`` of a Python bool (scalar variants) is an int, not a negation
-        return (not mask) if isinstance(mask, bool) else ~mask
-    half_fan = laser.half_fan_rad
-    if laser.fan_profile == "flat":
-        fan_norm = 1.0 / (2.0 * half_fan)
-    else:  # Gaussian in angle, 1/e² at the fan edge
-        fan_norm = 1.0 / (half_fan * math.sqrt(math.pi / 2.0))
-    gauss_norm = math.sqrt(2.0 / math.pi)
+@functools.lru_cache(maxsize=None)
+def _integrator_class(variant: str):
+    """The integrator class of the Mitsuba ``variant`` (the one set now: its base class
+    ``mi.SamplingIntegrator`` exists only once a variant is set), made once per variant.
+    The class only delegates to the module's functions, which read the :class:`_Setup`."""
+    import mitsuba as mi
 
     class LaserTriangulationIntegrator(mi.SamplingIntegrator):
-        def __init__(self, props=None):
+        def __init__(self, setup: _Setup, props=None):
             super().__init__(props if props is not None else mi.Properties())
+            self.setup = setup
 
         def aov_names(self):
             return ["laser"]
 
         def to_string(self):
-            return (f"LaserTriangulationIntegrator[max_bounces={max_bounces}, "
-                    f"max_scatter={max_scatter}, paths={len(seqs)}]")
-
-        def _irradiance_perp(self, xp):
-            """Irradiance (W/mm²) on a plane normal to the beam at unfolded points ``xp``."""
-            u = xp - P(laser.origin_mm)
-            h = dr.dot(u, V(laser.normal))
-            up = u - h * V(laser.normal)
-            rho = dr.norm(up)
-            phi = dr.atan2(dr.dot(up, V(e2_l)), dr.dot(up, V(dir_l)))
-            if laser.fan_profile == "flat":
-                fan = dr.select(dr.abs(phi) <= half_fan, fan_norm, 0.0)
-            else:
-                fan = fan_norm * dr.exp(-2.0 * dr.square(phi / half_fan))
-            w = laser.waist_mm * dr.sqrt(1.0 + dr.square((rho - laser.waist_distance_mm)
-                                                          / laser.rayleigh_range_mm))
-            q = 2.0 * dr.square(h / w)
-            # Truncate the Gaussian at 1e-7 of its peak (|h| > 2.84 w): no visible light is
-            # lost and the shadow rays of the far tails are skipped.
-            across = dr.select(q < _GAUSS_CUT, gauss_norm / w * dr.exp(-q), 0.0)
-            return laser.power_W * fan / dr.maximum(rho, 1e-6) * across, rho
-
-        def _visible(self, scene, si, seq, O_v, active):
-            """Shadow test of the path x → (mirrors, reversed) → laser."""
-            vis = mi.Bool(active)
-            p = mi.Point3f(si.p)
-            target = P(O_v)
-            first = True
-            for k in reversed(seq):
-                m = mirrors[k]
-                n = V(m.normal)
-                seg = target - p
-                dn = dr.dot(seg, n)
-                side = dr.dot(p, n) - m.d_mm
-                t = -side / dr.select(dn != 0, dn, 1.0)
-                vis = vis & (side > 0) & (dn < 0) & (t > 0) & (t < 1)
-                hit = p + t * seg
-                q = hit - P(m.center_mm)
-                vis = vis & (dr.abs(dr.dot(q, V(m.u_axis))) <= m.half_width_mm) \
-                          & (dr.abs(dr.dot(q, V(m.v_axis))) <= m.half_height_mm)
-                hit_off = hit + n * clearance_mm  # just in front of the mirror surface
-                if first:
-                    ray = si.spawn_ray_to(hit_off)
-                else:
-                    ray = mi.Ray3f(p, dr.normalize(hit_off - p))
-                    ray.maxt = dr.norm(hit_off - p)
-                ray.maxt = ray.maxt * (1.0 - _SHADOW_EPS)
-                vis = vis & NOT(scene.ray_test(ray, vis))
-                target = reflect_point(target, m)
-                p = hit_off
-                first = False
-            end = P(laser.origin_mm)
-            if first:
-                ray = si.spawn_ray_to(end)
-            else:
-                ray = mi.Ray3f(p, dr.normalize(end - p))
-                ray.maxt = dr.norm(end - p)
-            ray.maxt = ray.maxt * (1.0 - _SHADOW_EPS)
-            return vis & NOT(scene.ray_test(ray, vis))
-
-        def _laser(self, scene, si, bsdf, active):
-            ctx = mi.BSDFContext()
-            out = mi.Spectrum(0.0)
-            if laser.power_W == 0.0:
-                return out
-            for seq, O_v, refl in virtual:
-                # Unfolded point x' = T_first ... T_last x (apply the last mirror first).
-                xp = mi.Point3f(si.p)
-                for k in reversed(seq):
-                    xp = reflect_point(xp, mirrors[k])
-                E_perp, _ = self._irradiance_perp(xp)
-                lit = active & (E_perp > 0)
-                to_l = P(O_v) - si.p
-                wi_world = dr.normalize(to_l)
-                lit = lit & (dr.dot(wi_world, si.n) > 0)
-                lit = self._visible(scene, si, seq, O_v, lit)
-                f = bsdf.eval(ctx, si, si.to_local(wi_world), lit)
-                out += dr.select(lit, f * (E_perp * refl * MM2_PER_M2), 0.0)
-            return out
-
-        def _to_surface(self, scene, sampler, ray, active, beta, env=None):
-            """Follow ``ray`` through up to ``max_bounces`` mirror reflections to the first
-            non-delta surface.  Returns ``(ray, found, beta, L_env)``: the last ray (from the
-            last mirror, or the original), whether it meets a non-delta surface, the
-            throughput times the mirrors' weights, and the environment light of rays that
-            escape (``env``: the ambient emitter, or None)."""
-            ctx = mi.BSDFContext()
-            L = mi.Spectrum(0.0)
-            found = mi.Bool(False)
-            for depth in range(max_bounces + 1):
-                si = scene.ray_intersect(ray, active)
-                valid = active & si.is_valid()
-                if env is not None:
-                    L += dr.select(active & NOT(si.is_valid()), beta * env.eval(si, active), 0.0)
-                if scalar and not valid:  # a scalar miss has no BSDF to ask for its flags
-                    break
-                bsdf = si.bsdf(ray)
-                is_mirror = valid & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta)
-                found = found | (valid & NOT(is_mirror))
-                if depth == max_bounces:
-                    break
-                bs, w = bsdf.sample(ctx, si, sampler.next_1d(is_mirror), sampler.next_2d(is_mirror),
-                                    is_mirror)
-                beta = dr.select(is_mirror, beta * w, beta)
-                # Start the reflected ray on the exact reflected line, a little way along it:
-                # `spawn_ray` offsets the origin along the mirror normal (~7 µm at these
-                # coordinates), which displaced every mirror view by ~2.5 µm in the section.
-                wo = si.to_world(bs.wo)
-                ray = dr.select(is_mirror, mi.Ray3f(si.p + wo * MIRROR_STEP_MM, wo, si.time,
-                                                    si.wavelengths), ray)
-                active = is_mirror & (bs.pdf > 0)
-            return ray, found, beta, L
+            s = self.setup
+            return (f"LaserTriangulationIntegrator[max_bounces={s.max_bounces}, "
+                    f"max_scatter={s.max_scatter}, paths={len(s.virtual)}]")
 
         def sample(self, scene, sampler, ray, medium=None, active=True):
-            # 1. Follow the camera ray through up to K mirror reflections until it meets a
-            #    non-delta surface (escaped rays see the ambient environment).
-            ctx = mi.BSDFContext()
-            env = scene.environment() if ambient else None
-            ray, found, throughput, L = self._to_surface(scene, sampler, mi.Ray3f(ray),
-                                                         mi.Bool(active), mi.Spectrum(1.0), env)
-            # 2. Shade once at that surface: the laser through every mirror sequence (method of
-            #    images) and the ambient light by emitter sampling.
-            if scalar and not found:
-                return L, mi.Bool(True), [mi.Float(0.0)]
-            si = scene.ray_intersect(ray, found)
-            found = found & si.is_valid()
-            bsdf = si.bsdf(ray)
-            L_laser = throughput * self._laser(scene, si, bsdf, found)
-            L += L_laser
-            if ambient:
-                ds, em_w = scene.sample_emitter_direction(si, sampler.next_2d(found), True, found)
-                f = bsdf.eval(ctx, si, si.to_local(ds.d), found)
-                L += dr.select(found & (ds.pdf > 0), throughput * f * em_w, 0.0)
-            if max_scatter > 0 and laser.power_W != 0.0:
-                L_scatter = self._scatter(scene, sampler, si, bsdf, throughput, found)
-                L_laser = L_laser + L_scatter
-                L = L + L_scatter
-            aov = L_laser[0] if mi.is_monochromatic else mi.luminance(L_laser)
-            return L, mi.Bool(True), [aov]
+            return _sample(self.setup, scene, sampler, ray, active)
 
-        def _scatter(self, scene, sampler, si, bsdf, throughput, active):
-            """Interreflected laser light seen at ``si`` (``max_scatter`` BSDF-sampled bounces)."""
-            ctx = mi.BSDFContext()
-            out = mi.Spectrum(0.0)
-            beta = mi.Spectrum(throughput)
-            active = mi.Bool(active)
-            for _ in range(max_scatter):
-                if scalar and not active:
-                    break
-                bs, w = bsdf.sample(ctx, si, sampler.next_1d(active), sampler.next_2d(active), active)
-                beta = beta * w
-                active = active & (bs.pdf > 0)
-                ray = si.spawn_ray(si.to_world(bs.wo))
-                # Through up to K mirrors to the next non-delta point (as the camera ray).
-                ray, found, beta, _ = self._to_surface(scene, sampler, ray, active, beta)
-                if scalar and not found:
-                    break
-                si = scene.ray_intersect(ray, found)
-                active = found & si.is_valid()
-                bsdf = si.bsdf(ray)
-                out += dr.select(active, beta * self._laser(scene, si, bsdf, active), 0.0)
-            return out
+    return LaserTriangulationIntegrator
 
-    return LaserTriangulationIntegrator()
+
+# The integrator's methods, as functions of its setup.  Each runs in the variant that is set
+# (in a JIT variant once, while Dr.Jit traces the kernel; in a scalar one per sample).
+
+def _vec(v):
+    import mitsuba as mi
+
+    return mi.Vector3f(float(v[0]), float(v[1]), float(v[2]))
+
+
+def _point(v):
+    import mitsuba as mi
+
+    return mi.Point3f(float(v[0]), float(v[1]), float(v[2]))
+
+
+def _reflect_point(p, m: MirrorParams):
+    import drjit as dr
+
+    n = _vec(m.normal)
+    return p - 2.0 * (dr.dot(p, n) - m.d_mm) * n
+
+
+def _not(mask):
+    """``~mask``; for a Python bool (scalar variants) ``~`` is an int, not a negation."""
+    return (not mask) if isinstance(mask, bool) else ~mask
+
+
+def _irradiance_perp(s: _Setup, xp):
+    """Irradiance (W/mm²) on a plane normal to the beam at unfolded points ``xp``."""
+    import drjit as dr
+
+    laser = s.laser
+    half_fan = laser.half_fan_rad
+    u = xp - _point(laser.origin_mm)
+    h = dr.dot(u, _vec(laser.normal))
+    up = u - h * _vec(laser.normal)
+    rho = dr.norm(up)
+    phi = dr.atan2(dr.dot(up, _vec(s.e2)), dr.dot(up, _vec(laser.direction)))
+    if laser.fan_profile == "flat":
+        fan = dr.select(dr.abs(phi) <= half_fan, s.fan_norm, 0.0)
+    else:
+        fan = s.fan_norm * dr.exp(-2.0 * dr.square(phi / half_fan))
+    w = laser.waist_mm * dr.sqrt(1.0 + dr.square((rho - laser.waist_distance_mm)
+                                                  / laser.rayleigh_range_mm))
+    q = 2.0 * dr.square(h / w)
+    # Truncate the Gaussian at 1e-7 of its peak (|h| > 2.84 w): no visible light is
+    # lost and the shadow rays of the far tails are skipped.
+    across = dr.select(q < _GAUSS_CUT, _GAUSS_NORM / w * dr.exp(-q), 0.0)
+    return laser.power_W * fan / dr.maximum(rho, 1e-6) * across, rho
+
+
+def _shadow_ray(si, p, end, first: bool):
+    """The shadow ray from ``p`` to ``end`` (from the surface point ``si`` if ``first``),
+    shortened by the relative ``_SHADOW_EPS``."""
+    import drjit as dr
+    import mitsuba as mi
+
+    if first:
+        ray = si.spawn_ray_to(end)
+    else:
+        ray = mi.Ray3f(p, dr.normalize(end - p))
+        ray.maxt = dr.norm(end - p)
+    ray.maxt = ray.maxt * (1.0 - _SHADOW_EPS)
+    return ray
+
+
+def _visible(s: _Setup, scene, si, seq, O_v, active):
+    """Shadow test of the path x → (mirrors, reversed) → laser."""
+    import drjit as dr
+    import mitsuba as mi
+
+    vis = mi.Bool(active)
+    p = mi.Point3f(si.p)
+    target = _point(O_v)
+    first = True
+    for k in reversed(seq):
+        m = s.mirrors[k]
+        n = _vec(m.normal)
+        seg = target - p
+        dn = dr.dot(seg, n)
+        side = dr.dot(p, n) - m.d_mm
+        t = -side / dr.select(dn != 0, dn, 1.0)
+        vis = vis & (side > 0) & (dn < 0) & (t > 0) & (t < 1)
+        hit = p + t * seg
+        q = hit - _point(m.center_mm)
+        vis = vis & (dr.abs(dr.dot(q, _vec(m.u_axis))) <= m.half_width_mm) \
+                  & (dr.abs(dr.dot(q, _vec(m.v_axis))) <= m.half_height_mm)
+        hit_off = hit + n * s.clearance_mm  # just in front of the mirror surface
+        vis = vis & _not(scene.ray_test(_shadow_ray(si, p, hit_off, first), vis))
+        target = _reflect_point(target, m)
+        p = hit_off
+        first = False
+    ray = _shadow_ray(si, p, _point(s.laser.origin_mm), first)
+    return vis & _not(scene.ray_test(ray, vis))
+
+
+def _laser(s: _Setup, scene, si, bsdf, active):
+    """The laser's direct light (every virtual laser) scattered at ``si`` towards ``si.wi``."""
+    import drjit as dr
+    import mitsuba as mi
+
+    ctx = mi.BSDFContext()
+    out = mi.Spectrum(0.0)
+    if s.laser.power_W == 0.0:
+        return out
+    for seq, O_v, refl in s.virtual:
+        # Unfolded point x' = T_first ... T_last x (apply the last mirror first).
+        xp = mi.Point3f(si.p)
+        for k in reversed(seq):
+            xp = _reflect_point(xp, s.mirrors[k])
+        E_perp, _ = _irradiance_perp(s, xp)
+        lit = active & (E_perp > 0)
+        to_l = _point(O_v) - si.p
+        wi_world = dr.normalize(to_l)
+        lit = lit & (dr.dot(wi_world, si.n) > 0)
+        lit = _visible(s, scene, si, seq, O_v, lit)
+        f = bsdf.eval(ctx, si, si.to_local(wi_world), lit)
+        out += dr.select(lit, f * (E_perp * refl * MM2_PER_M2), 0.0)
+    return out
+
+
+def _to_surface(s: _Setup, scene, sampler, ray, active, beta, env=None):
+    """Follow ``ray`` through up to ``max_bounces`` mirror reflections to the first
+    non-delta surface.  Returns ``(ray, found, beta, L_env)``: the last ray (from the
+    last mirror, or the original), whether it meets a non-delta surface, the
+    throughput times the mirrors' weights, and the environment light of rays that
+    escape (``env``: the ambient emitter, or None)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    ctx = mi.BSDFContext()
+    L = mi.Spectrum(0.0)
+    found = mi.Bool(False)
+    for depth in range(s.max_bounces + 1):
+        si = scene.ray_intersect(ray, active)
+        valid = active & si.is_valid()
+        if env is not None:
+            L += dr.select(active & _not(si.is_valid()), beta * env.eval(si, active), 0.0)
+        if s.scalar and not valid:  # a scalar miss has no BSDF to ask for its flags
+            break
+        bsdf = si.bsdf(ray)
+        is_mirror = valid & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta)
+        found = found | (valid & _not(is_mirror))
+        if depth == s.max_bounces:
+            break
+        bs, w = bsdf.sample(ctx, si, sampler.next_1d(is_mirror), sampler.next_2d(is_mirror),
+                            is_mirror)
+        beta = dr.select(is_mirror, beta * w, beta)
+        # Start the reflected ray on the exact reflected line, a little way along it:
+        # `spawn_ray` offsets the origin along the mirror normal (~7 µm at these
+        # coordinates), which displaced every mirror view by ~2.5 µm in the section.
+        wo = si.to_world(bs.wo)
+        ray = dr.select(is_mirror, mi.Ray3f(si.p + wo * MIRROR_STEP_MM, wo, si.time,
+                                            si.wavelengths), ray)
+        active = is_mirror & (bs.pdf > 0)
+    return ray, found, beta, L
+
+
+def _sample(s: _Setup, scene, sampler, ray, active):
+    """``SamplingIntegrator.sample``: ``(radiance, valid, [laser radiance])`` of a camera ray."""
+    import drjit as dr
+    import mitsuba as mi
+
+    # 1. Follow the camera ray through up to K mirror reflections until it meets a
+    #    non-delta surface (escaped rays see the ambient environment).
+    ctx = mi.BSDFContext()
+    env = scene.environment() if s.ambient else None
+    ray, found, throughput, L = _to_surface(s, scene, sampler, mi.Ray3f(ray), mi.Bool(active),
+                                            mi.Spectrum(1.0), env)
+    # 2. Shade once at that surface: the laser through every mirror sequence (method of
+    #    images) and the ambient light by emitter sampling.
+    if s.scalar and not found:
+        return L, mi.Bool(True), [mi.Float(0.0)]
+    si = scene.ray_intersect(ray, found)
+    found = found & si.is_valid()
+    bsdf = si.bsdf(ray)
+    L_laser = throughput * _laser(s, scene, si, bsdf, found)
+    L += L_laser
+    if s.ambient:
+        ds, em_w = scene.sample_emitter_direction(si, sampler.next_2d(found), True, found)
+        f = bsdf.eval(ctx, si, si.to_local(ds.d), found)
+        L += dr.select(found & (ds.pdf > 0), throughput * f * em_w, 0.0)
+    if s.max_scatter > 0 and s.laser.power_W != 0.0:
+        L_scatter = _scatter(s, scene, sampler, si, bsdf, throughput, found)
+        L_laser = L_laser + L_scatter
+        L = L + L_scatter
+    aov = L_laser[0] if mi.is_monochromatic else mi.luminance(L_laser)
+    return L, mi.Bool(True), [aov]
+
+
+def _scatter(s: _Setup, scene, sampler, si, bsdf, throughput, active):
+    """Interreflected laser light seen at ``si`` (``max_scatter`` BSDF-sampled bounces)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    ctx = mi.BSDFContext()
+    out = mi.Spectrum(0.0)
+    beta = mi.Spectrum(throughput)
+    active = mi.Bool(active)
+    for _ in range(s.max_scatter):
+        if s.scalar and not active:
+            break
+        bs, w = bsdf.sample(ctx, si, sampler.next_1d(active), sampler.next_2d(active), active)
+        beta = beta * w
+        active = active & (bs.pdf > 0)
+        ray = si.spawn_ray(si.to_world(bs.wo))
+        # Through up to K mirrors to the next non-delta point (as the camera ray).
+        ray, found, beta, _ = _to_surface(s, scene, sampler, ray, active, beta)
+        if s.scalar and not found:
+            break
+        si = scene.ray_intersect(ray, found)
+        active = found & si.is_valid()
+        bsdf = si.bsdf(ray)
+        out += dr.select(active, beta * _laser(s, scene, si, bsdf, active), 0.0)
+    return out
