@@ -168,6 +168,7 @@ class _Setup:
 
 def _build_setup(laser: LaserParams, mirrors: tuple[MirrorParams, ...], *, max_bounces: int,
                  ambient: bool, clearance_mm: float, max_scatter: int, scalar: bool) -> _Setup:
+    """The :class:`_Setup` of :func:`make_integrator`'s (checked) parameters."""
     O = np.asarray(laser.origin_mm)
     # Virtual lasers: light that met mirrors a then b appears to come from T_b T_a O.
     virtual = []
