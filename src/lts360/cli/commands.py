@@ -289,6 +289,9 @@ def cmd_measure(args) -> int:
         raise UsageError(f"--compensate: {args.calibration} has no view offsets (paper §4.4); "
                          f"make them with `lts360 compensate`")
     twin = None
+    if args.twin_corners == "on" and args.bias_model != "twin":
+        raise UsageError("--twin-corners on: only with --bias-model twin (the corners are "
+                         "restored in the twin)")
     if args.bias_model == "twin":
         twin = _twin_corrector(args, cal)
     sections = collect_sections(args.inputs, pitch_mm=args.pitch_mm)
@@ -379,7 +382,8 @@ def _twin_corrector(args, cal):
                          f"{args.twin_axial_mm}")
     try:
         return TwinCorrector(cal, twin_design(cal, args.twin_rig), material=args.twin_material,
-                             spp=args.twin_spp, axial_reach_mm=args.twin_axial_mm)
+                             spp=args.twin_spp, axial_reach_mm=args.twin_axial_mm,
+                             corners=getattr(args, "twin_corners", "off") == "on")
     except (ValueError, KeyError, FileNotFoundError) as exc:
         raise UsageError(f"--bias-model twin: {exc}") from None
 
