@@ -283,15 +283,15 @@ def cmd_measure(args) -> int:
         raise UsageError(f"--theta-step-deg: must be in (0, 10], got {args.theta_step_deg}")
     if not 0 < args.r_step_mm <= 0.1:
         raise UsageError(f"--r-step-mm: must be in (0, 0.1], got {args.r_step_mm}")
+    if args.twin_corners == "on" and args.bias_model != "twin":
+        raise UsageError("--twin-corners on: only with --bias-model twin (the corners are "
+                         "restored in the twin)")
     _scan_calibration_hint(args.calibration)
     cal = load_calibration(args.calibration)
     if args.compensate and not any(np.any(v) for v in cal.view_offsets_mm.values()):
         raise UsageError(f"--compensate: {args.calibration} has no view offsets (paper §4.4); "
                          f"make them with `lts360 compensate`")
     twin = None
-    if args.twin_corners == "on" and args.bias_model != "twin":
-        raise UsageError("--twin-corners on: only with --bias-model twin (the corners are "
-                         "restored in the twin)")
     if args.bias_model == "twin":
         twin = _twin_corrector(args, cal)
     sections = collect_sections(args.inputs, pitch_mm=args.pitch_mm)
