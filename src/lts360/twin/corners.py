@@ -11,8 +11,9 @@ What a metrology engineer does with such a profile: fit the two faces beside the
 where the line is not disturbed, and intersect them.  :func:`sharpen_corners` does that on
 the profile the twin is built from (no truth): corners are where the profile's direction turns
 by more than ``min_turn_deg`` across ``±window_mm`` of contour; a line is fitted to each side
-between 1.5 and 4 windows from the corner; the profile within 1.5 windows of their
-intersection is replaced by the two lines.  Whether the real corner is sharp is then the
+between 1.5 and 4 windows from the corner (it must leave no more than ``straight_mm`` rms, or
+twice the profile's roughness); the lines must turn by ``min_turn_deg`` too, and the profile
+within 1.5 windows of their intersection is replaced by them.  Whether the real corner is sharp is then the
 twin's to decide (:class:`lts360.twin.debias.TwinCorrector` renders both and keeps, per
 corner, the one whose twin measures like the real image).
 """
@@ -35,7 +36,8 @@ DEFAULT_CORNER_WINDOW_MM = 0.4
 #: A corner turns the profile's direction by at least this across ±window (a Ø20 mm circle
 #: turns 4.6° over ±0.4 mm; a hexagon's corner 60°).
 DEFAULT_CORNER_TURN_DEG = 20.0
-#: A side is a straight face when the line fitted to it leaves at most this rms (mm).
+#: A side is a straight face when the line fitted to it leaves at most this rms (mm), or twice
+#: the profile's own roughness where that is more (a noisy profile's faces are as rough as it).
 CORNER_STRAIGHT_MM = 0.02
 #: The sides are fitted between these multiples of the window from the corner; the profile
 #: within the first is replaced.
@@ -149,6 +151,11 @@ def sharpen_corners(profile: SectionProfile, *, window_mm: float = DEFAULT_CORNE
     k = max(1, int(round(window_mm / ds)))
     if _FIT_TO * k * 2 >= n:
         return profile, []
+    # a face is straight within the profile's own roughness (a noisy profile's faces are
+    # as rough as its flats): twice the robust spread of its second difference over ±k
+    rho0 = profile.rho_mm
+    d2 = rho0 - 0.5 * (np.roll(rho0, k) + np.roll(rho0, -k))
+    straight_mm = max(straight_mm, 2.0 * 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))))
     turn = turning_deg(profile, k)
     mag = np.abs(turn)
     # local maxima of |turn| over ±k vertices, above the threshold (vectorised window max)
