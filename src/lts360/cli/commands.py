@@ -283,6 +283,9 @@ def cmd_measure(args) -> int:
         raise UsageError(f"--theta-step-deg: must be in (0, 10], got {args.theta_step_deg}")
     if not 0 < args.r_step_mm <= 0.1:
         raise UsageError(f"--r-step-mm: must be in (0, 0.1], got {args.r_step_mm}")
+    if args.twin_corners == "on" and args.bias_model != "twin":
+        raise UsageError("--twin-corners on: only with --bias-model twin (the corners are "
+                         "restored in the twin)")
     _scan_calibration_hint(args.calibration)
     cal = load_calibration(args.calibration)
     if args.compensate and not any(np.any(v) for v in cal.view_offsets_mm.values()):
@@ -379,7 +382,8 @@ def _twin_corrector(args, cal):
                          f"{args.twin_axial_mm}")
     try:
         return TwinCorrector(cal, twin_design(cal, args.twin_rig), material=args.twin_material,
-                             spp=args.twin_spp, axial_reach_mm=args.twin_axial_mm)
+                             spp=args.twin_spp, axial_reach_mm=args.twin_axial_mm,
+                             corners=getattr(args, "twin_corners", "off") == "on")
     except (ValueError, KeyError, FileNotFoundError) as exc:
         raise UsageError(f"--bias-model twin: {exc}") from None
 

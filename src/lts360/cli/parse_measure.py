@@ -95,6 +95,12 @@ def _add_measure_parser(sub) -> None:
                         f"its slope and curvature along the axis (default "
                         f"{DEFAULT_AXIAL_REACH_MM:.1f}; 0: a straight "
                         "prism)")
+    s.add_argument("--twin-corners", choices=("off", "on"), default="off",
+                   help="on: the twin restores the measured profile's sharp corners (its "
+                        "direction turning >= 20° within ±0.4 mm: the faces beside it fitted and "
+                        "intersected) where the sharpened twin measures more like the image "
+                        "than the rounded one: a laser line rounds a sharp edge by its spot, "
+                        "a twin of the rounded profile corrects about half of it (default off)")
     s.set_defaults(func=cmd_measure)
 
 

@@ -32,6 +32,7 @@ import numpy as np
 from lts360.recon.model import Calibration
 from lts360.scenes.materials import get_material
 from lts360.scenes.rig import Rig
+from lts360.twin.corners import sharpen_corners
 from lts360.twin.profile import axial_form, loft_mesh, ray_radii, section_profile
 from lts360.twin.rig import laser_side_mirrors, twin_rig
 
@@ -41,6 +42,9 @@ __all__ = ["TwinCorrector", "TwinLog", "twin_corrected_raw", "DEFAULT_TWIN_SPP",
 
 DEFAULT_TWIN_SPP = 64
 DEFAULT_SMOOTH_DEG = 3.0
+#: Smoothing of the bias along θ about a sharpened corner, where it changes by tens of µm per
+#: degree (the 3° default would spread a corner's correction over its faces).
+CORNER_SMOOTH_DEG = 0.5
 #: Sections within this axial distance shape the twin along the axis (the sheet lights about
 #: ±0.6 mm of it; a pipe's 5 mm waviness is a quadratic within a few % over ±1 mm).
 DEFAULT_AXIAL_REACH_MM = 1.0
@@ -96,7 +100,14 @@ class TwinLog:
             + ")" for k, v in s.items()) + (
             f"; {n_ax} of {len(self.sections)} section(s) shaped along the axis by their "
             f"neighbours" if (n_ax := sum(1 for e in self.sections if e.get("axial"))) else "") \
-            + f"; render {self.render_s:.1f} s"
+            + self._describe_corners() + f"; render {self.render_s:.1f} s"
+
+    def _describe_corners(self) -> str:
+        rows = [c for e in self.sections for c in e.get("corners", [])]
+        if not any("corners" in e for e in self.sections):
+            return ""
+        kept = sum(1 for c in rows if c["sharpened"])
+        return f"; corners: {len(rows)} found, {kept} sharpened in the twin"
 
 
 def perturbed_design(design: Rig, key: str, u: float) -> Rig:
@@ -179,6 +190,12 @@ class TwinCorrector:
         The inputs' standard uncertainties (:data:`INPUT_U`); ``None``: not evaluated.
     axial_passes : int
         Passes over a scan when the twin is shaped along the axis (:meth:`passes`).
+    corners : bool
+        Restore the measured profile's sharp corners in the twin
+        (:func:`lts360.twin.corners.sharpen_corners`): the twin is rendered with and without
+        them, and each corner keeps the one whose twin measures more like the real image
+        (rms over the corner's zone, ±(zone + 1°)); about a kept corner the bias is smoothed
+        over :data:`CORNER_SMOOTH_DEG` only.  One more small render per section with corners.
     axial_reach_mm : float
         In a scan, the sections within this axial distance of a section give the twin its form
         along the axis (:func:`lts360.twin.profile.axial_form`: slope and curvature per φ), so
@@ -197,6 +214,7 @@ class TwinCorrector:
     input_u: dict | None = field(default_factory=lambda: dict(INPUT_U))
     axial_reach_mm: float = DEFAULT_AXIAL_REACH_MM
     axial_passes: int = DEFAULT_AXIAL_PASSES
+    corners: bool = False
     log: TwinLog = field(default_factory=TwinLog)
 
     def __post_init__(self) -> None:
@@ -313,9 +331,76 @@ class TwinCorrector:
                "slope_median": float(np.median(form.slope))}
         return loft_mesh(profile, form, half_length_mm=self.half_length_mm), rec
 
-    def __call__(self, result, measure, plan):
+    def _bias(self, result, measure, plan, profile, k: int):
+        """Render and measure the twin of ``profile`` (section ``k``): its surface, the log's
+        record of its axial form, the twin's measurement and per view its unsmoothed bias
+        ``b(θ)`` (the twin's radius − the profile's exact radius along the same ray)."""
         from lts360.recon.triangulation.inverse import plan_pixels
 
+        surface, axial = self._surface(k, profile)
+        t0 = time.perf_counter()
+        image = self.render(surface, plan_pixels(plan), seed=self.seed + k,
+                            exposure_fraction=self._exposure_fraction(result),
+                            rig=self.rig_for(plan.cal))
+        t1 = time.perf_counter()
+        twin = measure(image)
+        self.log.render_s += t1 - t0
+        self.log.measure_s += time.perf_counter() - t1
+        verts = profile.vertices_mm
+        bias = {}
+        for name, tv in twin.views.items():
+            # A compensated measurement moved the twin's view by its §4.4 offset (and its
+            # mastering) too: the twin is rendered through the very planes it is measured
+            # with, so what corrects those planes' errors in the real image is no bias of its.
+            exact = ray_radii(_compensated(verts, plan.cal, name,
+                                           getattr(twin, "compensated", False)),
+                              tv.theta_rad, near_mm=tv.r_mm)
+            bias[name] = np.where(tv.valid, tv.r_mm - exact, np.nan)
+        return surface, axial, twin, bias
+
+    @staticmethod
+    def _corner_phi(result, profile) -> dict:
+        """Per view, the polar angle about the profile's centre of the profile's point on each
+        ray of the grid."""
+        out = {}
+        for name, v in result.views.items():
+            th = np.asarray(v.theta_rad)
+            r = ray_radii(profile.vertices_mm, th)
+            d = r[:, None] * np.column_stack([np.cos(th), np.sin(th)]) - profile.center_mm
+            out[name] = np.arctan2(d[:, 1], d[:, 0])
+        return out
+
+    def _choose_corners(self, result, profile, found, twin, s_twin, entry) -> dict:
+        """Per view, the θ where the sharpened twin's bias applies: the zones of the corners
+        whose sharpened twin measures more like the real image (rms of real − twin radius over
+        the zone ±1°) than the rounded one."""
+        phi = self._corner_phi(result, profile)
+        zones = {name: np.zeros(p.shape, bool) for name, p in phi.items()}
+        rows = []
+        for c in found:
+            half = c.half_width_rad + np.radians(1.0)
+            sq = {"rounded": [], "sharp": []}
+            near = {}
+            for name, v in result.views.items():
+                near[name] = np.abs(np.angle(np.exp(1j * (phi[name] - c.phi_rad)))) <= half
+                for key, tw in (("rounded", twin), ("sharp", s_twin)):
+                    tv = tw.views.get(name)
+                    if tv is not None:
+                        d = (v.r_mm - tv.r_mm)[near[name]]
+                        sq[key].append(d[np.isfinite(d)])
+            rms = {k: (float(1e3 * np.sqrt(np.mean(np.concatenate(a) ** 2)))
+                       if a and np.concatenate(a).size else float("nan")) for k, a in sq.items()}
+            keep = bool(rms["sharp"] < rms["rounded"])
+            if keep:
+                for name in zones:
+                    zones[name] |= near[name]
+            rows.append({"phi_deg": float(np.degrees(c.phi_rad)), "turn_deg": c.turn_deg,
+                         "apex_mm": [float(x) for x in c.apex_mm], "sharpened": keep,
+                         "rms_rounded_um": rms["rounded"], "rms_sharp_um": rms["sharp"]})
+        entry["corners"] = rows
+        return zones
+
+    def __call__(self, result, measure, plan):
         entry = {"views": {}, "skipped": None}
         self.log.sections.append(entry)
         k = len(self.log.sections) - 1
@@ -327,36 +412,38 @@ class TwinCorrector:
         entry["profile"] = {"center_mm": profile.center_mm.tolist(),
                             "coverage": profile.coverage,
                             "largest_gap_deg": profile.largest_gap_deg}
-        surface, axial = self._surface(k, profile)
+        surface, axial, twin, bias = self._bias(result, measure, plan, profile, k)
         entry["axial"] = axial
-        t0 = time.perf_counter()
-        image = self.render(surface, plan_pixels(plan), seed=self.seed + k,
-                            exposure_fraction=self._exposure_fraction(result),
-                            rig=self.rig_for(plan.cal))
-        t1 = time.perf_counter()
-        twin = measure(image)
-        self.log.render_s += t1 - t0
-        self.log.measure_s += time.perf_counter() - t1
+        zones, s_bias = {}, {}
+        if self.corners:
+            sharp, found = sharpen_corners(profile)
+            if found:
+                s_surface, _, s_twin, s_bias = self._bias(result, measure, plan, sharp, k)
+                zones = self._choose_corners(result, profile, found, twin, s_twin, entry)
+                if any(z.any() for z in zones.values()):
+                    profile, surface, twin = sharp, s_surface, s_twin
+            else:
+                entry["corners"] = []
         if self.input_u and not self.log.inputs:
             self._input_sensitivity(result, measure, plan, profile, twin, surface)
         grid = result.grid
-        size = max(1, int(round(np.radians(self.smooth_deg) / grid.theta_step_rad)))
+        step = grid.theta_step_rad
+        size = max(1, int(round(np.radians(self.smooth_deg) / step)))
+        narrow = max(1, int(round(np.radians(CORNER_SMOOTH_DEG) / step)))
         wrap = bool(grid.is_full_turn)
-        verts = profile.vertices_mm
         views = {}
         for name, v in result.views.items():
-            tv = twin.views.get(name)
-            if tv is None:
+            if name not in bias:
                 views[name] = v
                 continue
-            # A compensated measurement moved the twin's view by its §4.4 offset (and its
-            # mastering) too: the twin is rendered through the very planes it is measured
-            # with, so what corrects those planes' errors in the real image is no bias of its.
-            exact = ray_radii(_compensated(verts, plan.cal, name,
-                                           getattr(twin, "compensated", False)),
-                              tv.theta_rad, near_mm=tv.r_mm)
-            b = np.where(tv.valid, tv.r_mm - exact, np.nan)
+            b = bias[name]
             b_s, count = _nan_smooth(b, size, wrap)
+            zone = zones.get(name)
+            if zone is not None and zone.any() and name in s_bias:
+                b_n, count_n = _nan_smooth(s_bias[name], narrow, wrap)
+                b = np.where(zone, s_bias[name], b)
+                b_s = np.where(zone, b_n, b_s)
+                count = np.where(zone, count_n, count)
             ok = v.valid & np.isfinite(b_s)
             resid = (b - b_s)[np.isfinite(b) & np.isfinite(b_s)]
             sd = float(np.std(resid)) if resid.size > 2 else float("nan")
