@@ -63,7 +63,7 @@ from lts360.inspect.profile import DEFAULT_GAP_DEG, BinnedProfile, uniform_profi
 
 __all__ = ["ISO_DEFAULT_UPR", "default_upr", "gaussian_transfer", "filter_grid",
            "extreme_quantities", "ExtremeNoise", "extreme_noise", "DEFAULT_EXTREME_DRAWS",
-           "EXTREME_KEYS", "FILTER_UPR_RANGE"]
+           "EXTREME_KEYS", "FILTER_UPR_RANGE", "denoised_form", "form_threshold"]
 
 #: ISO/TS 12181-2 default cut-off (UPR) by diameter: ``(largest diameter in mm, UPR)``.
 ISO_DEFAULT_UPR = ((8.0, 15.0), (25.0, 50.0), (80.0, 150.0), (250.0, 500.0),
@@ -81,8 +81,6 @@ EXTREME_KEYS = ("d_min_mm", "d_max_mm", "ovality_mm", "ront_LSCI_mm", "ront_MZCI
 DEFAULT_CIRCLE_DRAWS = 12
 #: Sections of a scan on which the MCCI and MICI are fitted again.
 CIRCLE_SECTIONS = 5
-#: The form of the Monte Carlo: the profile through the filter at this fraction of the cut-off.
-FORM_FRACTION = 1.0 / 3.0
 
 
 def default_upr(diameter_mm: float) -> float:
@@ -182,13 +180,65 @@ class ExtremeNoise:
 def _ar1_noise(rng: np.random.Generator, m: int, n: int, s: float, rho: float) -> np.ndarray:
     """``(m, n)`` circular AR(1) noise of standard deviation ``s`` and lag-1 correlation ρ
     (white noise shaped by the AR(1) spectrum, normalised to unit variance)."""
+    spec = _ar1_spectrum(n, rho)
+    white = rng.standard_normal((m, n))
+    return s * np.fft.irfft(np.sqrt(spec) * np.fft.rfft(white, axis=1), n=n, axis=1)
+
+
+def _ar1_spectrum(n: int, rho: float) -> np.ndarray:
+    """``(n // 2 + 1,)`` power of each order of circular AR(1) noise of unit variance on ``n``
+    bins (mean 1 over the circle's ``n`` orders)."""
     f = np.fft.rfftfreq(n)
     spec = (1 - rho * rho) / np.abs(1 - rho * np.exp(-2j * np.pi * f)) ** 2
     wts = np.where((np.arange(f.size) == 0) | ((n % 2 == 0) & (np.arange(f.size) == f.size - 1)),
                    1.0, 2.0)
-    spec = spec / ((spec * wts).sum() / n)  # exact unit variance on the circle
-    white = rng.standard_normal((m, n))
-    return s * np.fft.irfft(np.sqrt(spec) * np.fft.rfft(white, axis=1), n=n, axis=1)
+    return spec / ((spec * wts).sum() / n)
+
+
+def denoised_form(r_mm: np.ndarray, s_bin_mm: float, rho: float) -> np.ndarray:
+    """The form of a profile ``r_mm : (n,)`` (uniform grid, NaN: gap) without its noise.
+
+    Each order k of the profile's Fourier series is kept whole or dropped: kept where its
+    power exceeds :func:`form_threshold` times the power the bins' AR(1) noise (``s_bin_mm``,
+    ``rho``) puts there, or where k <= 1 (the mean and the centre).  A gap is bridged by a
+    straight line for the transform and is NaN again in the form.  With ``s_bin_mm`` = 0 the
+    form is the profile.
+    """
+    r = np.asarray(r_mm, float)
+    n = r.size
+    ok = np.isfinite(r)
+    if not ok.any() or not s_bin_mm > 0:
+        return r.copy()
+    idx = np.arange(n)
+    filled = np.interp(idx, idx[ok], r[ok], period=n) if not ok.all() else r
+    X = np.fft.rfft(filled)
+    noise = n * s_bin_mm ** 2 * _ar1_spectrum(n, rho)
+    keep = np.abs(X) ** 2 > form_threshold(n) * noise
+    keep[:2] = True
+    return np.where(ok, np.fft.irfft(np.where(keep, X, 0.0), n=n), np.nan)
+
+
+def form_threshold(n_bins: int) -> float:
+    """``2 ln(n_bins / 2)``: an order of pure noise (its power exponential about its mean)
+    exceeds this many times its mean power with probability ``(2 / n_bins)²``, so on the
+    ``n_bins / 2`` orders of a profile of noise alone the form keeps an order once in
+    ``n_bins / 2`` profiles."""
+    return 2.0 * float(np.log(max(n_bins, 4) / 2.0))
+
+
+def _residual_noise(r: np.ndarray, form: np.ndarray, s: float, rho: float) -> tuple[float, float]:
+    """``(s, ρ)`` of the residuals ``r − form`` (uniform grid, NaN: gap): their RMS and
+    lag-1 correlation (clipped to [0, 0.99]); the given ``(s, ρ)`` where fewer than 8 bins."""
+    res = r - form
+    ok = np.isfinite(res)
+    pair = ok & np.roll(ok, -1)
+    if ok.sum() < 8 or pair.sum() < 8:
+        return s, rho
+    var = float(np.mean(res[ok] ** 2))
+    if var == 0:
+        return 0.0, 0.0
+    r1 = float(np.mean((res * np.roll(res, -1))[pair])) / var
+    return float(np.sqrt(var)), float(np.clip(r1, 0.0, 0.99))
 
 
 def _wild_block_noise(rng: np.random.Generator, m: int, resid: np.ndarray,
@@ -206,7 +256,7 @@ def _wild_block_noise(rng: np.random.Generator, m: int, resid: np.ndarray,
 
 
 def extreme_noise(raw: BinnedProfile, *, upr: float | None, s_bin_mm: float, rho: float,
-                  form_upr: float, n_draws: int = DEFAULT_EXTREME_DRAWS, rng=None,
+                  n_draws: int = DEFAULT_EXTREME_DRAWS, rng=None,
                   circle_draws: int = DEFAULT_CIRCLE_DRAWS, circles: bool = True,
                   gap_deg: float = DEFAULT_GAP_DEG) -> ExtremeNoise:
     """Bias and u of the extremes of one section from its own noise (module docstring).
@@ -221,9 +271,6 @@ def extreme_noise(raw: BinnedProfile, *, upr: float | None, s_bin_mm: float, rho
         Standard deviation of one bin's noise.
     rho : float, [0, 1)
         Lag-1 correlation of neighbouring bins' noise.
-    form_upr : float
-        The form is the profile through :data:`FORM_FRACTION` of ``upr``, or of this cut-off
-        when no filter is applied.
     n_draws : int, >= 2
     circle_draws : int, [4, 2 n_draws]
         Draws (half of each noise model) on which the MCCI and MICI are fitted again.
@@ -235,9 +282,11 @@ def extreme_noise(raw: BinnedProfile, *, upr: float | None, s_bin_mm: float, rho
         raise ValueError(f"n_draws must be >= 2, got {n_draws}")
     rng = np.random.default_rng(rng)
     _, r = uniform_profile(raw, gap_deg=gap_deg)
-    form = filter_grid(r, FORM_FRACTION * (form_upr if upr is None else upr))
     s = float(s_bin_mm) if np.isfinite(s_bin_mm) else 0.0
     rho = float(np.clip(rho if np.isfinite(rho) else 0.0, 0.0, 0.99))
+    for _ in range(2):  # the form, then the noise about it, then the form again
+        form = denoised_form(r, s, rho)
+        s, rho = _residual_noise(r, form, s, rho)
     q0 = extreme_quantities(form[None, :])
     nan = np.full(1, np.nan)
     q0.update(_circle_ront(raw.centre_mm, form[None, :]) if circles else
@@ -247,19 +296,17 @@ def extreme_noise(raw: BinnedProfile, *, upr: float | None, s_bin_mm: float, rho
     bias = {k: float("nan") for k in EXTREME_KEYS}
     u = dict(bias)
     gauss = _ar1_noise(rng, n_draws, len(r), s, rho)
-    # the Gaussian model's level where it matters: the noise the filter passes, above the
-    # form's cut-off, must have the variance the section's own residuals have in that band
-    # (a lag-1 model misses longer-range correlation, which the filter passes in full)
-    lo = FORM_FRACTION * (form_upr if upr is None else upr)
-    band = (lambda x: filter_grid(x, upr) - filter_grid(x, lo)) if upr is not None else \
-        (lambda x: x - filter_grid(x, lo))
-    obs = band(r)
+    resid = np.where(np.isfinite(r), r - form, 0.0)
+    # the Gaussian model's level where it matters: the noise the filter passes must have the
+    # variance the section's own residuals about the form have through that filter (a lag-1
+    # model misses longer-range correlation, which the filter passes in full)
+    passed = (lambda x: filter_grid(x, upr)) if upr is not None else (lambda x: x)
+    obs = passed(np.where(np.isfinite(r), r - form, np.nan))
     var_obs = float(np.nanmean(obs ** 2)) if np.isfinite(obs).any() else 0.0
-    var_mod = float(np.mean(band(gauss) ** 2))
+    var_mod = float(np.mean(passed(gauss) ** 2))
     if var_mod > 0 and var_obs > var_mod:
         gauss = gauss * np.sqrt(var_obs / var_mod)
-    for noise in (gauss,
-                  _wild_block_noise(rng, n_draws, np.where(np.isfinite(r), r - form, 0.0), rho)):
+    for noise in (gauss, _wild_block_noise(rng, n_draws, resid, rho)):
         if upr is not None:
             noise = np.fft.irfft(gaussian_transfer(len(r), upr) * np.fft.rfft(noise, axis=1),
                                  n=len(r), axis=1)

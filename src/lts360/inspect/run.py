@@ -203,7 +203,7 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
     u_cal, cal_note = _calibration_u(calibration, xy_list, view_list, n_draws=n_draws,
                                      seed=seed)
     exs = _extreme_noises(sections, bin_deg=bin_deg, gap_deg=gap_deg, filter_upr=filter_upr,
-                          form_upr=form_upr, extreme_draws=extreme_draws, seed=seed)
+                          extreme_draws=extreme_draws, seed=seed)
     rows = _section_rows(sections, exs, u_cal, u_radial_mm, times)
     inspection = Inspection(data={}, sections=sections, band=band)
     nom_out = None
@@ -325,8 +325,7 @@ def _calibration_u(calibration, xy_list: list, view_list: list, *, n_draws: int,
 
 
 def _extreme_noises(sections: list[SectionResult], *, bin_deg: float, gap_deg: float,
-                    filter_upr: float | None, form_upr: float | None, extreme_draws: int,
-                    seed: int) -> list[tuple]:
+                    filter_upr: float | None, extreme_draws: int, seed: int) -> list[tuple]:
     """Per section ``(ExtremeNoise, scatter u table, correlation length in bins)``: the noise
     of its extremes from a Monte Carlo of its own unfiltered profile's noise. The MCCI and
     MICI are fitted on at most :data:`CIRCLE_SECTIONS` sections spread over the scan; every
@@ -343,8 +342,7 @@ def _extreme_noises(sections: list[SectionResult], *, bin_deg: float, gap_deg: f
         bin_u = max(s.scatter_mm / np.sqrt(max(s.points_per_bin, 1.0)),
                     s_bin if np.isfinite(s_bin) else 0.0)
         rho = (tau - 1) / (tau + 1) if np.isfinite(tau) else 0.0
-        ex = extreme_noise(raw, upr=filter_upr, s_bin_mm=bin_u, rho=rho,
-                           form_upr=form_upr or 150.0, n_draws=extreme_draws,
+        ex = extreme_noise(raw, upr=filter_upr, s_bin_mm=bin_u, rho=rho, n_draws=extreme_draws,
                            rng=np.random.SeedSequence([seed, int(s.index)]), gap_deg=gap_deg,
                            circles=i in picks)
         exs.append((ex, us, tau))
