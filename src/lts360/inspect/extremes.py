@@ -9,46 +9,40 @@ the diameter (:data:`ISO_DEFAULT_UPR`: 15 UPR up to Ø 8 mm, 50 up to 25, 150 up
 **Extremes of noisy data are biased.**  D max, D min, ovality and RONt are read at the
 profile's extremes; noise on the bins pushes a maximum up and a minimum down, by more the more
 independent bins sit near the extreme — a bias, not only a spread.  :func:`extreme_noise`
-estimates both from the section's own noise by a Monte Carlo: the profile through the filter
-at a third of the cut-off is taken as the form, and its residuals about it (each bin's own
-noise) are redrawn in two ways, and each quantity takes the larger bias and the larger u of
-the two: (a) a stationary Gaussian AR(1) noise with the section's bin noise (its standard
-deviation ``s`` and lag-1 correlation ``ρ``, as in :mod:`lts360.inspect.uncertainty`); (b) a
-wild block bootstrap — each block of neighbouring bins keeps its
-residuals, multiplied by a random sign (blocks of about twice the bins' correlation length
-τ = (1 + ρ)/(1 − ρ), with a random start per draw).  That keeps the noise where it is: a view
-that is noisier than the others (a mirror view, a glint) and heavy tails (a stray point) weigh
-in the draws as they weigh in the measurement, which a stationary Gaussian model of the same
-variance does not (measured on rendered scans: with an AR(1) Gaussian model RONt against the
-LS circle fell outside U in 11 of 20 realistic PVC sections; on white synthetic noise, where
-the Gaussian model is exact, the bootstrap alone came out 30 % low).  The redrawn noise is
-passed through the same filter and added to the form, and every extreme quantity is
-recomputed.  The Gaussian model's level is raised, where needed, until the noise it puts in
-the band the filter passes above the form's cut-off has the variance the section's own
-residuals have there (a lag-1 model misses longer-range correlation, which the filter passes
-in full: speckle and render noise on the realistic renders).  The
-mean shift over the draws is the bias, their standard deviation the noise's u.  The reported
-value is not corrected (a gauge reports the filtered extreme); the bias enters U linearly:
+estimates both from the section's own noise by a Monte Carlo about the section's **form**, the
+profile without its noise (:func:`denoised_form`): each order of the profile's Fourier series
+is kept whole where its power stands out of the noise's power at that order (more than
+:func:`form_threshold` times it: a pure-noise order passes once in n/2 profiles), dropped
+otherwise.  The noise (its standard deviation per bin ``s`` and lag-1 correlation ``ρ``) is
+measured as the residuals about that form (twice: the form from the caller's ``s``, ``ρ``, the
+noise about it, the form again).  The residuals are redrawn in two ways, and each quantity
+takes the larger bias and the larger u of the two: (a) a stationary Gaussian AR(1) noise with
+that ``s`` and ``ρ``, its level raised where needed until the noise the filter passes has the
+variance the residuals have through it; (b) a wild block bootstrap — each block of neighbouring
+bins keeps its residuals, multiplied by a random sign (blocks of about twice the bins'
+correlation length τ = (1 + ρ)/(1 − ρ), with a random start per draw), so a noisier view or a
+stray point weighs in the draws as in the measurement.  The redrawn noise is passed through
+the same filter and added to the form, and every extreme quantity is recomputed.  The mean
+shift over the draws is the bias, their standard deviation the noise's u.  The reported value
+is not corrected (a gauge reports the filtered extreme); the bias enters U linearly:
 ``U = 2 u_c + |bias|`` (:func:`lts360.inspect.run`).
 
-The form is smoothed harder than the reported profile because the reported profile carries
-filtered noise of its own: its maxima are sharp noise peaks, and noise added to them raises
-them less than it raises the flat top of the true form (measured on synthetic oval sections
-with white and correlated noise: with the reported profile as the form the bias came out
-25–35 % low; with a third of the cut-off it matched the error against the truth).  A third of
-the default cut-off still carries the pipes' features (an ovality, three lobes, a dent of
-3 mm σ of arc on Ø 32 mm: about 10 UPR).
+Why a form without noise: the bias depends on the shape at the extremes (noise raises a flat
+top more than a sharp peak).  A form that still carries noise (the profile through a filter at
+a third of the cut-off, the earlier choice) has noise peaks for extremes, so noise added to it
+raised them less than noise raises the true form's: measured on a realistic scan of the smooth
+oval PVC pipe (20 sections, 150 UPR), RONt against the LS circle erred by +87 µm on average
+while that form's bias was +59 µm; with the true form the same noise model gave +85 µm, and
+with :func:`denoised_form` +80 µm.  The AR(1) model of the bins itself matched the error's
+spectrum there (rendered error about the truth against the model, per band of orders).
 
 RONt against the LS circle is recomputed on every draw about the linearised LS circle (the
 first harmonic removed), and the MZCI's RONt takes its bias and u (both are peak-to-valleys of
-the same radii about centres a few µm apart; measured on synthetic sections, they agree);
-against the MCCI and MICI the circles are fitted again on the first ``circle_draws`` draws
-(the MCCI and MICI of an oval are ill-conditioned: their centre slides along the major axis
-with the noise, so their RONt moves far more than the LS one).  Those refits cost most of the
-time (~0.04 s a draw), so ``lts360 inspect`` runs them on at most
-:data:`CIRCLE_SECTIONS` sections spread over the scan and each other section takes the
-nearest one's (the shape that makes them ill-conditioned, an ovality, changes slowly along a
-scan).
+the same radii about centres a few µm apart; the MZCI's is the smaller, so this errs on the
+safe side); against the MCCI and MICI the circles are fitted again on the first
+``circle_draws`` draws of each model (the MCCI and MICI of an oval are ill-conditioned: their
+centre slides along a flat valley with the noise, so their RONt moves far more than the LS
+one).  Those refits cost most of the time (~0.025 s a draw).
 Gaps are left out of every extreme (their noise is filtered as if the profile were closed: a
 small error at a gap's edge).
 """
@@ -76,11 +70,11 @@ DEFAULT_EXTREME_DRAWS = 64
 #: The quantities the Monte Carlo recomputes.
 EXTREME_KEYS = ("d_min_mm", "d_max_mm", "ovality_mm", "ront_LSCI_mm", "ront_MZCI_mm",
                 "ront_MCCI_mm", "ront_MICI_mm")
-#: Draws on which the MCCI and MICI are fitted again (12: bias to ±30 % of u; each costs the
-#: two fits, ~0.04 s).
-DEFAULT_CIRCLE_DRAWS = 12
-#: Sections of a scan on which the MCCI and MICI are fitted again.
-CIRCLE_SECTIONS = 5
+#: Draws on which the MCCI and MICI are fitted again, half from each noise model (32: bias to
+#: ±18 % of u; each draw costs the two fits, ~0.025 s).  Every section is fitted: one section's
+#: bias and u do not stand for its neighbours' (taking the nearest of five fitted sections' on
+#: the realistic scans, RONt(MCCI) fell outside U in 5 of 89 sections; fitting each, in none).
+DEFAULT_CIRCLE_DRAWS = 32
 
 
 def default_upr(diameter_mm: float) -> float:
