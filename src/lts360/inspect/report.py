@@ -483,7 +483,7 @@ def _events_html(data: dict) -> str:
     events = (_table(_EVENT_HEAD, _event_rows(scan["events"])) if scan["events"]
               else f"<p>none significant beyond the threshold of {thr}</p>")
     if scan.get("events_not_significant"):
-        events += (f"<p>Beyond {thr} but within their own U (not significant, not "
+        events += (f"<p>Beyond {thr} but within what the noise alone gives (not significant, not "
                    "reported as events):</p>"
                    + _table(_EVENT_HEAD, _event_rows(scan["events_not_significant"])))
     return events
