@@ -488,8 +488,13 @@ def _scan(sections: list[SectionResult], rows: list[dict], lump_mm: float) -> di
                        "centre_y_mm")},
            }
     un = [r.get("extreme_noise", {}).get("u_mm", {}) for r in rows]
+    # each section's D min and D max less its own noise bias: the bias depends on the shape at
+    # the extreme (a dent's narrow minimum is pushed down less than the flat minimum of a
+    # smooth section), so it does not cancel against the scan's median
+    unbiased = {k: val(k) - np.array([r[k].get("bias_mm", 0.0) for r in rows])
+                for k in ("d_min_mm", "d_max_mm")}
     ev = scan_mod.lumps_and_necks(
-        z, val("d_min_mm"), val("d_max_mm"), threshold_mm=lump_mm,
+        z, unbiased["d_min_mm"], unbiased["d_max_mm"], threshold_mm=lump_mm,
         indices=[s.index for s in sections],
         u_d_min_mm=[x.get("d_min_mm", np.nan) for x in un] if all(un) else None,
         u_d_max_mm=[x.get("d_max_mm", np.nan) for x in un] if all(un) else None)

@@ -24,10 +24,10 @@ stage position ``z_mm``.
   :data:`FALSE_EVENT_RATE` shared by the scan's ``2 n`` tests (the lump and the neck-down of
   each section), so a smooth scan shows a false event in about 1 of 20 scans (measured on
   the realistic PVC scan: one section's noise moved Dmax 54 µm above the median, p_noise
-  0.012, a lump at the old rule's 2 U).  Each event also reports its confidence, the
-  probability that the true deviation exceeds the threshold (normal,
-  ``Φ((|dev| − threshold) / u)``).  Runs beyond the threshold but not significant are
-  returned apart.
+  0.039 with its u of 24 µm, a lump by the earlier rule, dev > U(k = 2)).  Each event also
+  reports its confidence, the probability that the true deviation exceeds the threshold
+  (normal, ``Φ((|dev| − threshold) / u)``).  Runs beyond the threshold but not significant
+  are returned apart.
 * **Axis**: the line ``x = x₀ + aₓ z``, ``y = y₀ + a_y z`` fitted to the LS centres; tilt is its
   angle to the stage's z.  **Straightness** (ISO 12780's median line, about the LS axis): the
   diameter of the smallest cylinder coaxial with the LS axis that holds every centre.
