@@ -47,6 +47,21 @@ def test_an_event_must_stand_out_of_the_extremes_noise_tail():
         assert ev[0].p_noise == pytest.approx(1 - np.exp(-np.exp(-bump / beta - 0.3665)))
 
 
+def test_a_dent_as_long_as_the_scan_is_not_taken_for_noise():
+    """A 0.4 mm neck-down over the whole 10 mm scan (the rendered PVC pipe's dent, seen from
+    inside it), D min's noise u = 20 µm: the deviations' spread along z is the dent, not noise,
+    and the neck-down is significant (the scan's section-to-section noise is read from the
+    second differences along z, which a smooth dent hardly moves)."""
+    z = np.arange(10) - 4.5
+    rng = np.random.default_rng(5)
+    dmin = 31.6 - 0.4 * np.exp(-z**2 / (2 * 2.5**2)) + 0.02 * rng.standard_normal(10)
+    u = np.full(10, 0.020)
+    ev = lumps_and_necks(z, dmin, np.full(10, 32.4), threshold_mm=0.05, u_d_min_mm=u,
+                         u_d_max_mm=u)
+    assert [(e.kind, e.significant) for e in ev] == [("neck-down", True)]
+    assert ev[0].u_mm < 0.03  # the section's own u, not the dent's spread (~0.15 mm)
+
+
 def test_axis_and_cylindricity_of_a_tilted_cylinder():
     z = np.linspace(-5, 5, 11)
     th = np.radians(np.arange(0, 360, 1.0))

@@ -11,12 +11,14 @@ stage position ``z_mm``.
   the extreme deviation.  A local bump or dent changes Dmax or Dmin long before it moves the
   LS diameter.  Given each section's noise u of Dmax and Dmin, an event must also be
   significant against that noise (``u² = u_section² + u_median²``,
-  ``u_median = 1.2533 · u_scan / √n``; the noise bias and the calibration are common to
-  every section and cancel).  ``u_section`` is the larger of the section's u and the scan's
-  own spread of the deviations ``u_scan = 1.4826 · MAD`` (robust: a few sections with an
-  event leave it alone; on a smooth pipe it is the section-to-section noise the model may
-  miss).  Dmax is the largest of many noisy diameters, so its noise is not normal: its upper
-  tail is an extreme-value (Gumbel) one, of scale ``β = u √6 / π`` (the Monte Carlo's u of
+  ``u_median = 1.2533 · median(u_section) / √n``; the calibration is common to every section
+  and cancels, and each section's own noise bias is removed first).  ``u_section`` is the
+  larger of the section's u and the scan's own section-to-section noise ``u_scan = 1.4826 ·
+  MAD(Δ²dev) / √6`` from the second differences of the deviations along z (robust: a few
+  sections with an event leave it alone, and a smooth change along z, a long dent or a
+  waviness, does not count as noise; on a smooth pipe it is the section-to-section noise the
+  model may miss).  Dmax is the largest of many noisy diameters, so its noise is not normal:
+  its upper tail is an extreme-value (Gumbel) one, of scale ``β = u √6 / π`` (the Monte Carlo's u of
   the extremes, :mod:`lts360.inspect.extremes`), and likewise Dmin's lower tail.
   ``p_noise`` is the probability that noise alone moves one section's Dmax (Dmin) this far
   from the scan's median, ``1 − exp(−exp(−dev/β − 0.3665))`` (0.3665 = −ln ln 2: the
@@ -137,7 +139,9 @@ def lumps_and_necks(z_mm, d_min_mm, d_max_mm, *, threshold_mm: float = DEFAULT_L
             continue
         dev = sign * (v - np.nanmedian(v))
         if u is not None:
-            u_scan = 1.4826 * float(np.nanmedian(np.abs(dev)))
+            d2 = np.diff(dev[np.isfinite(dev)], 2)
+            u_scan = 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / np.sqrt(6.0) \
+                if d2.size >= 3 else 0.0
             u = np.maximum(np.asarray(u, float)[order], u_scan)
             u_med = 1.2533 * float(np.nanmedian(u)) / np.sqrt(np.isfinite(v).sum())
             n_tests = int(np.isfinite(v).sum())
