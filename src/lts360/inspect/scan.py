@@ -24,12 +24,12 @@ stage position ``z_mm``.
   from the scan's median, ``1 − exp(−exp(−dev/β − 0.3665))`` (0.3665 = −ln ln 2: the
   median's place in the Gumbel); an event is significant where ``p_noise`` is below
   :data:`FALSE_EVENT_RATE` shared by the scan's ``2 n`` tests (the lump and the neck-down of
-  each section), so a smooth scan shows a false event in about 1 of 20 scans (measured on
-  the realistic PVC scan: one section's noise moved Dmax 54 µm above the median, p_noise
-  0.039 with its u of 24 µm, a lump by the earlier rule, dev > U(k = 2)).  Each event also
-  reports its confidence, the probability that the true deviation exceeds the threshold
-  (normal, ``Φ((|dev| − threshold) / u)``).  Runs beyond the threshold but not significant
-  are returned apart.
+  each section), so a smooth scan shows a false event in about 1 of 20 scans (on the
+  realistic smooth PVC scan one section's noise moved Dmax 54 µm above the median: a lump by
+  the earlier rule, dev > U(k = 2); its p_noise, 0.01–0.04, is far above 0.05 / 40).  Each
+  event also reports its confidence, the probability that the true deviation exceeds the
+  threshold (normal, ``Φ((|dev| − threshold) / u)``).  Runs beyond the threshold but not
+  significant are returned apart.
 * **Axis**: the line ``x = x₀ + aₓ z``, ``y = y₀ + a_y z`` fitted to the LS centres; tilt is its
   angle to the stage's z.  **Straightness** (ISO 12780's median line, about the LS axis): the
   diameter of the smallest cylinder coaxial with the LS axis that holds every centre.
