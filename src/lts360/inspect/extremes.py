@@ -3,8 +3,9 @@
 **Default filter.**  Roundness is defined on the profile through the Gaussian filter of ISO
 16610-21 with a cut-off in undulations per revolution (UPR) that ISO/TS 12181-2 chooses from
 the diameter (:data:`ISO_DEFAULT_UPR`: 15 UPR up to Ø 8 mm, 50 up to 25, 150 up to 80, 500 up to
-250, 1500 above).  :func:`default_upr` picks it; ``lts360 inspect`` applies it unless told
-``--filter-upr N`` or ``--filter none``.
+250, 1500 above; the values are the standard's series of cut-offs, the diameter breakpoints
+are not verified against its text).  :func:`default_upr` picks it; ``lts360 inspect`` applies
+it unless told ``--filter-upr N`` or ``--filter none``.
 
 **Extremes of noisy data are biased.**  D max, D min, ovality and RONt are read at the
 profile's extremes; noise on the bins pushes a maximum up and a minimum down, by more the more
