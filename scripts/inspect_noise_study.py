@@ -38,8 +38,9 @@ def study(root: Path, extra: list[str]) -> dict:
             r = {"z_mm": s["z_mm"]}
             for k in KEYS:
                 r[k] = (s[k]["value"] - t[k], s[k]["U_k2"])
-            for ref in REFS:
-                r["ront_" + ref] = (s["ront_mm"][ref]["value"] - t["ront_mm"][ref],
+            for ref in REFS:  # None: not determined by the points (reported as such)
+                v = s["ront_mm"][ref]["value"]
+                r["ront_" + ref] = (None if v is None else v - t["ront_mm"][ref],
                                     s["ront_mm"][ref]["U_k2"])
             rows.append(r)
         scan = data["scan"]
@@ -53,17 +54,20 @@ def study(root: Path, extra: list[str]) -> dict:
 
 
 def summarise(res: dict) -> None:
-    total = inside = 0
+    total = inside = undetermined = 0
     for name, r in res.items():
         cols = [c for c in r["sections"][0] if c != "z_mm"]
         cells = []
         for c in cols:
-            ok = sum(abs(e) <= U for e, U in (s[c] for s in r["sections"]))
-            worst = max(r["sections"], key=lambda s: abs(s[c][0]) - s[c][1])[c]
-            cells.append(f"{c} {ok}/{len(r['sections'])} (worst {1e3 * worst[0]:+.0f}/"
-                         f"{1e3 * worst[1]:.0f} µm)")
-            total += len(r["sections"])
+            vals = [s[c] for s in r["sections"] if s[c][0] is not None]
+            ok = sum(abs(e) <= U for e, U in vals)
+            worst = max(vals, key=lambda v: abs(v[0]) - v[1])
+            nd = len(r["sections"]) - len(vals)
+            cells.append(f"{c} {ok}/{len(vals)} (worst {1e3 * worst[0]:+.0f}/"
+                         f"{1e3 * worst[1]:.0f} µm{f'; {nd} not determined' if nd else ''})")
+            total += len(vals)
             inside += ok
+            undetermined += nd
         ax = r["axis"] or {}
         print(f"{name}: {r['filter']}")
         print("   " + "; ".join(cells))
@@ -72,7 +76,8 @@ def summarise(res: dict) -> None:
               f"{ax.get('tilt_deg')} (U {ax.get('U_tilt_deg')}) {ax.get('note', '')}; "
               f"dominant wavelength {r['spectrum'].get('dominant_wavelength_mm')} "
               f"{r['spectrum'].get('note', '')}")
-    print(f"all: {inside}/{total} values within U(k = 2) ({100 * inside / max(total, 1):.1f} %)")
+    print(f"all: {inside}/{total} values within U(k = 2) ({100 * inside / max(total, 1):.1f} %); "
+          f"{undetermined} not determined by the points (not reported)")
 
 
 if __name__ == "__main__":

@@ -145,17 +145,24 @@ def realistic(tmp_path_factory):
 def test_realistic_extremes_lie_within_their_u(realistic):
     """D min, D max, ovality and RONt against the four circles within U(k = 2) of the truth:
     8 sections × 7 values; the study's target is 95 % (STUDIES.md); on 56 values allow 3
-    outside (a 95 % coverage gives ≤ 3 outside with 70 % probability, ≤ 5 with 95 %: 5)."""
-    out = []
+    outside (a 95 % coverage gives ≤ 3 outside with 70 % probability, ≤ 5 with 95 %: 5).
+    A MICI resting on a gap's chord is not reported (None, with the section's warning): at
+    most one such on these near-closed profiles."""
+    out, undetermined = [], 0
     for data in realistic.values():
         for s in data["sections"]:
             t = s["truth"]
             for k in ("d_min_mm", "d_max_mm", "ovality_mm"):
                 out.append(abs(s[k]["value"] - t[k]) <= s[k]["U_k2"])
             for ref in ("LSCI", "MZCI", "MCCI", "MICI"):
-                out.append(abs(s["ront_mm"][ref]["value"] - t["ront_mm"][ref])
-                           <= s["ront_mm"][ref]["U_k2"])
-    assert len(out) == 56 and sum(not x for x in out) <= 5
+                v = s["ront_mm"][ref]["value"]
+                if v is None:
+                    assert ref == "MICI" and any("MICI" in w for w in s["warnings"])
+                    undetermined += 1
+                    continue
+                out.append(abs(v - t["ront_mm"][ref]) <= s["ront_mm"][ref]["U_k2"])
+    assert len(out) + undetermined == 56 and undetermined <= 1
+    assert sum(not x for x in out) <= 5
 
 
 def test_no_false_lump_on_the_gauge_and_the_axis_of_a_short_scan(realistic):

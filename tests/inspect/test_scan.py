@@ -31,6 +31,37 @@ def test_a_lump_is_found_too():
         ("lump", 3.0, 3.5, pytest.approx(1.0))]
 
 
+def test_an_event_must_stand_out_of_the_extremes_noise_tail():
+    """20 sections, each D max with noise u = 17 µm (the realistic PVC scan's): noise alone
+    moves one section's D max 54 µm above the median with p ≈ 0.01 (its Gumbel tail), far above
+    the scan's false-event rate shared by 40 tests: not significant; 150 µm is (p ≈ 1e-5)."""
+    z = np.arange(20) * 1.0
+    u = np.full(20, 0.017)
+    for bump, significant in ((0.054, False), (0.150, True)):
+        dmax = np.full(20, 32.4)
+        dmax[12] += bump
+        ev = lumps_and_necks(z, np.full(20, 31.6), dmax, threshold_mm=0.05, u_d_min_mm=u,
+                             u_d_max_mm=u)
+        assert [e.kind for e in ev] == ["lump"] and ev[0].significant is significant
+        beta = np.hypot(0.017, 1.2533 * 0.017 / np.sqrt(20)) * np.sqrt(6) / np.pi
+        assert ev[0].p_noise == pytest.approx(1 - np.exp(-np.exp(-bump / beta - 0.3665)))
+
+
+def test_a_dent_as_long_as_the_scan_is_not_taken_for_noise():
+    """A 0.4 mm neck-down over the whole 10 mm scan (the rendered PVC pipe's dent, seen from
+    inside it), D min's noise u = 20 µm: the deviations' spread along z is the dent, not noise,
+    and the neck-down is significant (the scan's section-to-section noise is read from the
+    second differences along z, which a smooth dent hardly moves)."""
+    z = np.arange(10) - 4.5
+    rng = np.random.default_rng(5)
+    dmin = 31.6 - 0.4 * np.exp(-z**2 / (2 * 2.5**2)) + 0.02 * rng.standard_normal(10)
+    u = np.full(10, 0.020)
+    ev = lumps_and_necks(z, dmin, np.full(10, 32.4), threshold_mm=0.05, u_d_min_mm=u,
+                         u_d_max_mm=u)
+    assert [(e.kind, e.significant) for e in ev] == [("neck-down", True)]
+    assert ev[0].u_mm < 0.03  # the section's own u, not the dent's spread (~0.15 mm)
+
+
 def test_axis_and_cylindricity_of_a_tilted_cylinder():
     z = np.linspace(-5, 5, 11)
     th = np.radians(np.arange(0, 360, 1.0))

@@ -31,7 +31,7 @@ import numpy as np
 
 __all__ = ["ReferenceCircle", "least_squares_circle", "minimum_zone_circle",
            "minimum_circumscribed_circle", "maximum_inscribed_circle", "reference_circles",
-           "REFERENCES", "MZ_TOLERANCE_MM"]
+           "REFERENCES", "MZ_TOLERANCE_MM", "inscribed_on_a_chord", "CHORD_SAGITTA_MM"]
 
 #: The four reference circles, in the order they are reported.
 REFERENCES = ("LSCI", "MZCI", "MCCI", "MICI")
@@ -211,6 +211,35 @@ def maximum_inscribed_circle(xy_mm, *, tol_mm: float = 1e-4) -> ReferenceCircle:
     centre = np.asarray(line.coords)[0]
     r = _radii(xy, centre)
     return ReferenceCircle("MICI", centre, float(r.min()), float(r.min()), float(r.max()))
+
+
+#: A chord across a gap whose sagitta on the circle exceeds this (mm) can hold the MICI where
+#: the profile is not measured; below it the chord stands for the part's arc to better than
+#: 10 µm (a tenth of the MICI's RONt U on the realistic scans: 80-250 µm), as a point would.
+CHORD_SAGITTA_MM = 0.01
+
+
+def inscribed_on_a_chord(xy_mm, mici: ReferenceCircle, *, tol_mm: float = 1e-3) -> float:
+    """The widest gap (deg about the MICI's centre) whose chord holds the MICI: the chord,
+    the polygon's edge across the gap, comes within ``tol_mm`` of the circle and its sagitta
+    exceeds :data:`CHORD_SAGITTA_MM`.  0 where only measured points hold it (the MICI is
+    determined by the points).  The profile behind a chord is not measured: a convex part's
+    arc lies outside it, so a MICI held by a chord is smaller than the part's."""
+    xy = _as_xy(xy_mm)
+    d = xy - mici.centre_mm
+    order = np.argsort(np.arctan2(d[:, 1], d[:, 0]), kind="stable")
+    a, b = d[order], np.roll(d[order], -1, axis=0)
+    seg = b - a
+    L2 = np.einsum("ij,ij->i", seg, seg)
+    t = np.clip(-np.einsum("ij,ij->i", a, seg) / np.maximum(L2, 1e-300), 0.0, 1.0)
+    dist = np.hypot(*(a + t[:, None] * seg).T)
+    hold = (L2 / (8.0 * max(mici.radius_mm, 1e-9)) > CHORD_SAGITTA_MM) & \
+        (dist < mici.radius_mm + tol_mm)
+    if not hold.any():
+        return 0.0
+    ang = np.abs(np.angle(np.exp(1j * (np.arctan2(b[:, 1], b[:, 0])
+                                       - np.arctan2(a[:, 1], a[:, 0])))))
+    return float(np.degrees(ang[hold].max()))
 
 
 def reference_circles(xy_mm) -> dict[str, ReferenceCircle]:

@@ -3,52 +3,47 @@
 **Default filter.**  Roundness is defined on the profile through the Gaussian filter of ISO
 16610-21 with a cut-off in undulations per revolution (UPR) that ISO/TS 12181-2 chooses from
 the diameter (:data:`ISO_DEFAULT_UPR`: 15 UPR up to Ø 8 mm, 50 up to 25, 150 up to 80, 500 up to
-250, 1500 above).  :func:`default_upr` picks it; ``lts360 inspect`` applies it unless told
-``--filter-upr N`` or ``--filter none``.
+250, 1500 above; the values are the standard's series of cut-offs, the diameter breakpoints
+are not verified against its text).  :func:`default_upr` picks it; ``lts360 inspect`` applies
+it unless told ``--filter-upr N`` or ``--filter none``.
 
 **Extremes of noisy data are biased.**  D max, D min, ovality and RONt are read at the
 profile's extremes; noise on the bins pushes a maximum up and a minimum down, by more the more
 independent bins sit near the extreme — a bias, not only a spread.  :func:`extreme_noise`
-estimates both from the section's own noise by a Monte Carlo: the profile through the filter
-at a third of the cut-off is taken as the form, and its residuals about it (each bin's own
-noise) are redrawn in two ways, and each quantity takes the larger bias and the larger u of
-the two: (a) a stationary Gaussian AR(1) noise with the section's bin noise (its standard
-deviation ``s`` and lag-1 correlation ``ρ``, as in :mod:`lts360.inspect.uncertainty`); (b) a
-wild block bootstrap — each block of neighbouring bins keeps its
-residuals, multiplied by a random sign (blocks of about twice the bins' correlation length
-τ = (1 + ρ)/(1 − ρ), with a random start per draw).  That keeps the noise where it is: a view
-that is noisier than the others (a mirror view, a glint) and heavy tails (a stray point) weigh
-in the draws as they weigh in the measurement, which a stationary Gaussian model of the same
-variance does not (measured on rendered scans: with an AR(1) Gaussian model RONt against the
-LS circle fell outside U in 11 of 20 realistic PVC sections; on white synthetic noise, where
-the Gaussian model is exact, the bootstrap alone came out 30 % low).  The redrawn noise is
-passed through the same filter and added to the form, and every extreme quantity is
-recomputed.  The Gaussian model's level is raised, where needed, until the noise it puts in
-the band the filter passes above the form's cut-off has the variance the section's own
-residuals have there (a lag-1 model misses longer-range correlation, which the filter passes
-in full: speckle and render noise on the realistic renders).  The
-mean shift over the draws is the bias, their standard deviation the noise's u.  The reported
-value is not corrected (a gauge reports the filtered extreme); the bias enters U linearly:
+estimates both from the section's own noise by a Monte Carlo about the section's **form**, the
+profile without its noise (:func:`denoised_form`): each order of the profile's Fourier series
+is kept whole where its power stands out of the noise's power at that order (more than
+:func:`form_threshold` times it: a pure-noise order passes once in n/2 profiles), dropped
+otherwise.  The noise (its standard deviation per bin ``s`` and lag-1 correlation ``ρ``) is
+measured as the residuals about that form (twice: the form from the caller's ``s``, ``ρ``, the
+noise about it, the form again).  The residuals are redrawn in two ways, and each quantity
+takes the larger bias and the larger u of the two: (a) a stationary Gaussian AR(1) noise with
+that ``s`` and ``ρ``, its level raised where needed until the noise the filter passes has the
+variance the residuals have through it; (b) a wild block bootstrap — each block of neighbouring
+bins keeps its residuals, multiplied by a random sign (blocks of about twice the bins'
+correlation length τ = (1 + ρ)/(1 − ρ), with a random start per draw), so a noisier view or a
+stray point weighs in the draws as in the measurement.  The redrawn noise is passed through
+the same filter and added to the form, and every extreme quantity is recomputed.  The mean
+shift over the draws is the bias, their standard deviation the noise's u.  The reported value
+is not corrected (a gauge reports the filtered extreme); the bias enters U linearly:
 ``U = 2 u_c + |bias|`` (:func:`lts360.inspect.run`).
 
-The form is smoothed harder than the reported profile because the reported profile carries
-filtered noise of its own: its maxima are sharp noise peaks, and noise added to them raises
-them less than it raises the flat top of the true form (measured on synthetic oval sections
-with white and correlated noise: with the reported profile as the form the bias came out
-25–35 % low; with a third of the cut-off it matched the error against the truth).  A third of
-the default cut-off still carries the pipes' features (an ovality, three lobes, a dent of
-3 mm σ of arc on Ø 32 mm: about 10 UPR).
+Why a form without noise: the bias depends on the shape at the extremes (noise raises a flat
+top more than a sharp peak).  A form that still carries noise (the profile through a filter at
+a third of the cut-off, the earlier choice) has noise peaks for extremes, so noise added to it
+raised them less than noise raises the true form's: measured on a realistic scan of the smooth
+oval PVC pipe (20 sections, 150 UPR), RONt against the LS circle erred by +87 µm on average
+while that form's bias was +59 µm; with the true form the same noise model gave +85 µm, and
+with :func:`denoised_form` +80 µm.  The AR(1) model of the bins itself matched the error's
+spectrum there (rendered error about the truth against the model, per band of orders).
 
 RONt against the LS circle is recomputed on every draw about the linearised LS circle (the
 first harmonic removed), and the MZCI's RONt takes its bias and u (both are peak-to-valleys of
-the same radii about centres a few µm apart; measured on synthetic sections, they agree);
-against the MCCI and MICI the circles are fitted again on the first ``circle_draws`` draws
-(the MCCI and MICI of an oval are ill-conditioned: their centre slides along the major axis
-with the noise, so their RONt moves far more than the LS one).  Those refits cost most of the
-time (~0.04 s a draw), so ``lts360 inspect`` runs them on at most
-:data:`CIRCLE_SECTIONS` sections spread over the scan and each other section takes the
-nearest one's (the shape that makes them ill-conditioned, an ovality, changes slowly along a
-scan).
+the same radii about centres a few µm apart; the MZCI's is the smaller, so this errs on the
+safe side); against the MCCI and MICI the circles are fitted again on the first
+``circle_draws`` draws of each model (the MCCI and MICI of an oval are ill-conditioned: their
+centre slides along a flat valley with the noise, so their RONt moves far more than the LS
+one).  Those refits cost most of the time (~0.025 s a draw).
 Gaps are left out of every extreme (their noise is filtered as if the profile were closed: a
 small error at a gap's edge).
 """
@@ -63,7 +58,7 @@ from lts360.inspect.profile import DEFAULT_GAP_DEG, BinnedProfile, uniform_profi
 
 __all__ = ["ISO_DEFAULT_UPR", "default_upr", "gaussian_transfer", "filter_grid",
            "extreme_quantities", "ExtremeNoise", "extreme_noise", "DEFAULT_EXTREME_DRAWS",
-           "EXTREME_KEYS", "FILTER_UPR_RANGE"]
+           "EXTREME_KEYS", "FILTER_UPR_RANGE", "denoised_form", "form_threshold"]
 
 #: ISO/TS 12181-2 default cut-off (UPR) by diameter: ``(largest diameter in mm, UPR)``.
 ISO_DEFAULT_UPR = ((8.0, 15.0), (25.0, 50.0), (80.0, 150.0), (250.0, 500.0),
@@ -76,13 +71,11 @@ DEFAULT_EXTREME_DRAWS = 64
 #: The quantities the Monte Carlo recomputes.
 EXTREME_KEYS = ("d_min_mm", "d_max_mm", "ovality_mm", "ront_LSCI_mm", "ront_MZCI_mm",
                 "ront_MCCI_mm", "ront_MICI_mm")
-#: Draws on which the MCCI and MICI are fitted again (12: bias to ±30 % of u; each costs the
-#: two fits, ~0.04 s).
-DEFAULT_CIRCLE_DRAWS = 12
-#: Sections of a scan on which the MCCI and MICI are fitted again.
-CIRCLE_SECTIONS = 5
-#: The form of the Monte Carlo: the profile through the filter at this fraction of the cut-off.
-FORM_FRACTION = 1.0 / 3.0
+#: Draws on which the MCCI and MICI are fitted again, half from each noise model (32: bias to
+#: ±18 % of u; each draw costs the two fits, ~0.025 s).  Every section is fitted: one section's
+#: bias and u do not stand for its neighbours' (taking the nearest of five fitted sections' on
+#: the realistic scans, RONt(MCCI) fell outside U in 5 of 89 sections; fitting each, in none).
+DEFAULT_CIRCLE_DRAWS = 32
 
 
 def default_upr(diameter_mm: float) -> float:
@@ -182,13 +175,65 @@ class ExtremeNoise:
 def _ar1_noise(rng: np.random.Generator, m: int, n: int, s: float, rho: float) -> np.ndarray:
     """``(m, n)`` circular AR(1) noise of standard deviation ``s`` and lag-1 correlation ρ
     (white noise shaped by the AR(1) spectrum, normalised to unit variance)."""
+    spec = _ar1_spectrum(n, rho)
+    white = rng.standard_normal((m, n))
+    return s * np.fft.irfft(np.sqrt(spec) * np.fft.rfft(white, axis=1), n=n, axis=1)
+
+
+def _ar1_spectrum(n: int, rho: float) -> np.ndarray:
+    """``(n // 2 + 1,)`` power of each order of circular AR(1) noise of unit variance on ``n``
+    bins (mean 1 over the circle's ``n`` orders)."""
     f = np.fft.rfftfreq(n)
     spec = (1 - rho * rho) / np.abs(1 - rho * np.exp(-2j * np.pi * f)) ** 2
     wts = np.where((np.arange(f.size) == 0) | ((n % 2 == 0) & (np.arange(f.size) == f.size - 1)),
                    1.0, 2.0)
-    spec = spec / ((spec * wts).sum() / n)  # exact unit variance on the circle
-    white = rng.standard_normal((m, n))
-    return s * np.fft.irfft(np.sqrt(spec) * np.fft.rfft(white, axis=1), n=n, axis=1)
+    return spec / ((spec * wts).sum() / n)
+
+
+def denoised_form(r_mm: np.ndarray, s_bin_mm: float, rho: float) -> np.ndarray:
+    """The form of a profile ``r_mm : (n,)`` (uniform grid, NaN: gap) without its noise.
+
+    Each order k of the profile's Fourier series is kept whole or dropped: kept where its
+    power exceeds :func:`form_threshold` times the power the bins' AR(1) noise (``s_bin_mm``,
+    ``rho``) puts there, or where k <= 1 (the mean and the centre).  A gap is bridged by a
+    straight line for the transform and is NaN again in the form.  With ``s_bin_mm`` = 0 the
+    form is the profile.
+    """
+    r = np.asarray(r_mm, float)
+    n = r.size
+    ok = np.isfinite(r)
+    if not ok.any() or not s_bin_mm > 0:
+        return r.copy()
+    idx = np.arange(n)
+    filled = np.interp(idx, idx[ok], r[ok], period=n) if not ok.all() else r
+    X = np.fft.rfft(filled)
+    noise = n * s_bin_mm ** 2 * _ar1_spectrum(n, rho)
+    keep = np.abs(X) ** 2 > form_threshold(n) * noise
+    keep[:2] = True
+    return np.where(ok, np.fft.irfft(np.where(keep, X, 0.0), n=n), np.nan)
+
+
+def form_threshold(n_bins: int) -> float:
+    """``2 ln(n_bins / 2)``: an order of pure noise (its power exponential about its mean)
+    exceeds this many times its mean power with probability ``(2 / n_bins)²``, so on the
+    ``n_bins / 2`` orders of a profile of noise alone the form keeps an order once in
+    ``n_bins / 2`` profiles."""
+    return 2.0 * float(np.log(max(n_bins, 4) / 2.0))
+
+
+def _residual_noise(r: np.ndarray, form: np.ndarray, s: float, rho: float) -> tuple[float, float]:
+    """``(s, ρ)`` of the residuals ``r − form`` (uniform grid, NaN: gap): their RMS and
+    lag-1 correlation (clipped to [0, 0.99]); the given ``(s, ρ)`` where fewer than 8 bins."""
+    res = r - form
+    ok = np.isfinite(res)
+    pair = ok & np.roll(ok, -1)
+    if ok.sum() < 8 or pair.sum() < 8:
+        return s, rho
+    var = float(np.mean(res[ok] ** 2))
+    if var == 0:
+        return 0.0, 0.0
+    r1 = float(np.mean((res * np.roll(res, -1))[pair])) / var
+    return float(np.sqrt(var)), float(np.clip(r1, 0.0, 0.99))
 
 
 def _wild_block_noise(rng: np.random.Generator, m: int, resid: np.ndarray,
@@ -206,7 +251,7 @@ def _wild_block_noise(rng: np.random.Generator, m: int, resid: np.ndarray,
 
 
 def extreme_noise(raw: BinnedProfile, *, upr: float | None, s_bin_mm: float, rho: float,
-                  form_upr: float, n_draws: int = DEFAULT_EXTREME_DRAWS, rng=None,
+                  n_draws: int = DEFAULT_EXTREME_DRAWS, rng=None,
                   circle_draws: int = DEFAULT_CIRCLE_DRAWS, circles: bool = True,
                   gap_deg: float = DEFAULT_GAP_DEG) -> ExtremeNoise:
     """Bias and u of the extremes of one section from its own noise (module docstring).
@@ -221,9 +266,6 @@ def extreme_noise(raw: BinnedProfile, *, upr: float | None, s_bin_mm: float, rho
         Standard deviation of one bin's noise.
     rho : float, [0, 1)
         Lag-1 correlation of neighbouring bins' noise.
-    form_upr : float
-        The form is the profile through :data:`FORM_FRACTION` of ``upr``, or of this cut-off
-        when no filter is applied.
     n_draws : int, >= 2
     circle_draws : int, [4, 2 n_draws]
         Draws (half of each noise model) on which the MCCI and MICI are fitted again.
@@ -235,9 +277,11 @@ def extreme_noise(raw: BinnedProfile, *, upr: float | None, s_bin_mm: float, rho
         raise ValueError(f"n_draws must be >= 2, got {n_draws}")
     rng = np.random.default_rng(rng)
     _, r = uniform_profile(raw, gap_deg=gap_deg)
-    form = filter_grid(r, FORM_FRACTION * (form_upr if upr is None else upr))
     s = float(s_bin_mm) if np.isfinite(s_bin_mm) else 0.0
     rho = float(np.clip(rho if np.isfinite(rho) else 0.0, 0.0, 0.99))
+    for _ in range(2):  # the form, then the noise about it, then the form again
+        form = denoised_form(r, s, rho)
+        s, rho = _residual_noise(r, form, s, rho)
     q0 = extreme_quantities(form[None, :])
     nan = np.full(1, np.nan)
     q0.update(_circle_ront(raw.centre_mm, form[None, :]) if circles else
@@ -247,19 +291,17 @@ def extreme_noise(raw: BinnedProfile, *, upr: float | None, s_bin_mm: float, rho
     bias = {k: float("nan") for k in EXTREME_KEYS}
     u = dict(bias)
     gauss = _ar1_noise(rng, n_draws, len(r), s, rho)
-    # the Gaussian model's level where it matters: the noise the filter passes, above the
-    # form's cut-off, must have the variance the section's own residuals have in that band
-    # (a lag-1 model misses longer-range correlation, which the filter passes in full)
-    lo = FORM_FRACTION * (form_upr if upr is None else upr)
-    band = (lambda x: filter_grid(x, upr) - filter_grid(x, lo)) if upr is not None else \
-        (lambda x: x - filter_grid(x, lo))
-    obs = band(r)
+    resid = np.where(np.isfinite(r), r - form, 0.0)
+    # the Gaussian model's level where it matters: the noise the filter passes must have the
+    # variance the section's own residuals about the form have through that filter (a lag-1
+    # model misses longer-range correlation, which the filter passes in full)
+    passed = (lambda x: filter_grid(x, upr)) if upr is not None else (lambda x: x)
+    obs = passed(np.where(np.isfinite(r), r - form, np.nan))
     var_obs = float(np.nanmean(obs ** 2)) if np.isfinite(obs).any() else 0.0
-    var_mod = float(np.mean(band(gauss) ** 2))
+    var_mod = float(np.mean(passed(gauss) ** 2))
     if var_mod > 0 and var_obs > var_mod:
         gauss = gauss * np.sqrt(var_obs / var_mod)
-    for noise in (gauss,
-                  _wild_block_noise(rng, n_draws, np.where(np.isfinite(r), r - form, 0.0), rho)):
+    for noise in (gauss, _wild_block_noise(rng, n_draws, resid, rho)):
         if upr is not None:
             noise = np.fft.irfft(gaussian_transfer(len(r), upr) * np.fft.rfft(noise, axis=1),
                                  n=len(r), axis=1)

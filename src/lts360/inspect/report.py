@@ -168,6 +168,8 @@ def _fig_polar(ins: Inspection, k: int) -> bytes:
             else:
                 rho = rho - ref_r
             label = (f"MZCI zone, two circles (RONt {1e3 * c.ront_mm:.1f} µm)" if name == "MZCI"
+                     else f"{name} (on a gap's chord: not determined)"
+                     if name in s.extra.get("undetermined", [])
                      else f"{name} (RONt {1e3 * c.ront_mm:.1f} µm)")
             ax.plot(t, 1e3 * rho - base, color=_REF_COLOURS[name], lw=1,
                     ls="--" if name == "MZCI" else "-", label=None if j else label)
@@ -481,7 +483,7 @@ def _events_html(data: dict) -> str:
     events = (_table(_EVENT_HEAD, _event_rows(scan["events"])) if scan["events"]
               else f"<p>none significant beyond the threshold of {thr}</p>")
     if scan.get("events_not_significant"):
-        events += (f"<p>Beyond {thr} but within their own U (not significant, not "
+        events += (f"<p>Beyond {thr} but within what the noise alone gives (not significant, not "
                    "reported as events):</p>"
                    + _table(_EVENT_HEAD, _event_rows(scan["events_not_significant"])))
     return events

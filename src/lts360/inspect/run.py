@@ -14,7 +14,6 @@ import numpy as np
 from lts360.inspect import scan as scan_mod
 from lts360.inspect.circles import REFERENCES, least_squares_circle
 from lts360.inspect.extremes import (
-    CIRCLE_SECTIONS,
     DEFAULT_EXTREME_DRAWS,
     FILTER_UPR_RANGE,
     default_upr,
@@ -109,13 +108,15 @@ def _section_dict(s: SectionResult, us: dict, uc: dict | None, u_radial_mm: floa
         out["ovality_over_mean_pct"] = _q(d.ovality_over_mean_pct, 100 * uo / d.d_mean_mm)
     else:
         out["ovality_over_sum_pct"] = out["ovality_over_mean_pct"] = _q(None)
-    out["ront_mm"] = {name: _q(c.ront_mm, ex.u_mm[f"ront_{name}_mm"] if ex is not None
+    und = s.extra.get("undetermined", [])
+    out["ront_mm"] = {name: _q(None if name in und else c.ront_mm, ex.u_mm[f"ront_{name}_mm"] if ex is not None
                                else us["ront_mm"], g("ront_lsci_mm"),
                                bias=b.get(f"ront_{name}_mm"))
                       for name, c in s.circles.items()}
     out["reference_circles"] = {
         name: {"centre_x_mm": float(c.centre_mm[0]), "centre_y_mm": float(c.centre_mm[1]),
-               "diameter_mm": _q(c.diameter_mm, us["d_ls_mm"] if name == "LSCI"
+               "diameter_mm": _q(None if name in und else c.diameter_mm,
+                                 us["d_ls_mm"] if name == "LSCI"
                                  else us["size_ref_mm"], g("d_ls_mm"), ub)}
         for name, c in s.circles.items()}
     h = s.harmonics
@@ -203,7 +204,7 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
     u_cal, cal_note = _calibration_u(calibration, xy_list, view_list, n_draws=n_draws,
                                      seed=seed)
     exs = _extreme_noises(sections, bin_deg=bin_deg, gap_deg=gap_deg, filter_upr=filter_upr,
-                          form_upr=form_upr, extreme_draws=extreme_draws, seed=seed)
+                          extreme_draws=extreme_draws, seed=seed)
     rows = _section_rows(sections, exs, u_cal, u_radial_mm, times)
     inspection = Inspection(data={}, sections=sections, band=band)
     nom_out = None
@@ -325,16 +326,11 @@ def _calibration_u(calibration, xy_list: list, view_list: list, *, n_draws: int,
 
 
 def _extreme_noises(sections: list[SectionResult], *, bin_deg: float, gap_deg: float,
-                    filter_upr: float | None, form_upr: float | None, extreme_draws: int,
-                    seed: int) -> list[tuple]:
+                    filter_upr: float | None, extreme_draws: int, seed: int) -> list[tuple]:
     """Per section ``(ExtremeNoise, scatter u table, correlation length in bins)``: the noise
-    of its extremes from a Monte Carlo of its own unfiltered profile's noise. The MCCI and
-    MICI are fitted on at most :data:`CIRCLE_SECTIONS` sections spread over the scan; every
-    other section takes theirs from the nearest one fitted."""
+    of its extremes from a Monte Carlo of its own unfiltered profile's noise."""
     exs = []
-    picks = np.unique(np.round(np.linspace(0, len(sections) - 1,
-                                           min(CIRCLE_SECTIONS, len(sections)))).astype(int))
-    for i, s in enumerate(sections):
+    for s in sections:
         raw = s.extra.get("raw_profile", s.profile)  # unfiltered
         u_mean, tau, s_bin = correlated_mean_u(raw.theta_rad, raw.r_mm, s.ls.radius_mm,
                                                bin_deg=bin_deg)
@@ -343,15 +339,9 @@ def _extreme_noises(sections: list[SectionResult], *, bin_deg: float, gap_deg: f
         bin_u = max(s.scatter_mm / np.sqrt(max(s.points_per_bin, 1.0)),
                     s_bin if np.isfinite(s_bin) else 0.0)
         rho = (tau - 1) / (tau + 1) if np.isfinite(tau) else 0.0
-        ex = extreme_noise(raw, upr=filter_upr, s_bin_mm=bin_u, rho=rho,
-                           form_upr=form_upr or 150.0, n_draws=extreme_draws,
-                           rng=np.random.SeedSequence([seed, int(s.index)]), gap_deg=gap_deg,
-                           circles=i in picks)
+        ex = extreme_noise(raw, upr=filter_upr, s_bin_mm=bin_u, rho=rho, n_draws=extreme_draws,
+                           rng=np.random.SeedSequence([seed, int(s.index)]), gap_deg=gap_deg)
         exs.append((ex, us, tau))
-    for i, (ex, _, _) in enumerate(exs):  # the MCCI's and MICI's from the nearest section fitted
-        j = int(picks[np.argmin(np.abs(picks - i))])
-        for k in ("ront_MCCI_mm", "ront_MICI_mm"):
-            ex.bias_mm[k], ex.u_mm[k] = exs[j][0].bias_mm[k], exs[j][0].u_mm[k]
     return exs
 
 
@@ -498,8 +488,13 @@ def _scan(sections: list[SectionResult], rows: list[dict], lump_mm: float) -> di
                        "centre_y_mm")},
            }
     un = [r.get("extreme_noise", {}).get("u_mm", {}) for r in rows]
+    # each section's D min and D max less its own noise bias: the bias depends on the shape at
+    # the extreme (a dent's narrow minimum is pushed down less than the flat minimum of a
+    # smooth section), so it does not cancel against the scan's median
+    unbiased = {k: val(k) - np.array([r[k].get("bias_mm", 0.0) for r in rows])
+                for k in ("d_min_mm", "d_max_mm")}
     ev = scan_mod.lumps_and_necks(
-        z, val("d_min_mm"), val("d_max_mm"), threshold_mm=lump_mm,
+        z, unbiased["d_min_mm"], unbiased["d_max_mm"], threshold_mm=lump_mm,
         indices=[s.index for s in sections],
         u_d_min_mm=[x.get("d_min_mm", np.nan) for x in un] if all(un) else None,
         u_d_max_mm=[x.get("d_max_mm", np.nan) for x in un] if all(un) else None)

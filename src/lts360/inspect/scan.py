@@ -10,14 +10,26 @@ stage position ``z_mm``.
   with its start and end z, its length (number of sections × pitch), the z of its extreme and
   the extreme deviation.  A local bump or dent changes Dmax or Dmin long before it moves the
   LS diameter.  Given each section's noise u of Dmax and Dmin, an event must also be
-  significant: its deviation beyond its own U(k = 2) (``u² = u_section² + u_median²``,
-  ``u_median = 1.2533 · u_scan / √n``; the noise bias and the calibration are common to
-  every section and cancel).  ``u_section`` is the larger of the section's u and the scan's
-  own spread of the deviations ``u_scan = 1.4826 · MAD`` (robust: a few sections with an
-  event leave it alone; on a smooth pipe it is the section-to-section noise the model may
-  miss).  Each event reports its confidence, the probability that the true
-  deviation exceeds the threshold (normal, ``Φ((|dev| − threshold) / u)``).  Runs beyond the
-  threshold but within their U are returned apart, as not significant.
+  significant against that noise (``u² = u_section² + u_median²``,
+  ``u_median = 1.2533 · median(u_section) / √n``; the calibration is common to every section
+  and cancels, and each section's own noise bias is removed first).  ``u_section`` is the
+  larger of the section's u and the scan's own section-to-section noise ``u_scan = 1.4826 ·
+  MAD(Δ²dev) / √6`` from the second differences of the deviations along z (robust: a few
+  sections with an event leave it alone, and a smooth change along z, a long dent or a
+  waviness, does not count as noise; on a smooth pipe it is the section-to-section noise the
+  model may miss).  Dmax is the largest of many noisy diameters, so its noise is not normal:
+  its upper tail is an extreme-value (Gumbel) one, of scale ``β = u √6 / π`` (the Monte Carlo's u of
+  the extremes, :mod:`lts360.inspect.extremes`), and likewise Dmin's lower tail.
+  ``p_noise`` is the probability that noise alone moves one section's Dmax (Dmin) this far
+  from the scan's median, ``1 − exp(−exp(−dev/β − 0.3665))`` (0.3665 = −ln ln 2: the
+  median's place in the Gumbel); an event is significant where ``p_noise`` is below
+  :data:`FALSE_EVENT_RATE` shared by the scan's ``2 n`` tests (the lump and the neck-down of
+  each section), so a smooth scan shows a false event in about 1 of 20 scans (on the
+  realistic smooth PVC scan one section's noise moved Dmax 54 µm above the median: a lump by
+  the earlier rule, dev > U(k = 2); its p_noise, 0.01–0.04, is far above 0.05 / 40).  Each
+  event also reports its confidence, the probability that the true deviation exceeds the
+  threshold (normal, ``Φ((|dev| − threshold) / u)``).  Runs beyond the threshold but not
+  significant are returned apart.
 * **Axis**: the line ``x = x₀ + aₓ z``, ``y = y₀ + a_y z`` fitted to the LS centres; tilt is its
   angle to the stage's z.  **Straightness** (ISO 12780's median line, about the LS axis): the
   diameter of the smallest cylinder coaxial with the LS axis that holds every centre.
@@ -44,12 +56,15 @@ import numpy as np
 
 __all__ = ["Event", "AxisFit", "trend", "lumps_and_necks", "fit_axis", "cylindricity",
            "tilt_uncertainty", "diameter_spectrum", "DEFAULT_LUMP_MM", "TILT_TELL_DEG",
+           "FALSE_EVENT_RATE",
            "MIN_PERIODS"]
 
 #: Default threshold of a lump or neck-down (mm): 50 µm, a cable gauge's usual setting.
 DEFAULT_LUMP_MM = 0.05
 #: A tilt whose U(k = 2) exceeds this (deg) is "too short to tell".
 TILT_TELL_DEG = 0.05
+#: The scan's chance of one false lump or neck-down from noise alone.
+FALSE_EVENT_RATE = 0.05
 #: Periods a wavelength must fit in the scan to be named dominant.
 MIN_PERIODS = 2
 
@@ -83,6 +98,7 @@ class Event:
     u_mm: float | None = None
     U_k2_mm: float | None = None
     confidence: float | None = None
+    p_noise: float | None = None
     significant: bool = True
 
 
@@ -104,8 +120,8 @@ def lumps_and_necks(z_mm, d_min_mm, d_max_mm, *, threshold_mm: float = DEFAULT_L
     its median by more than it), as runs of consecutive sections in z order.
 
     With ``u_d_min_mm``, ``u_d_max_mm`` (each section's noise u) every event carries its u,
-    U(k = 2) and confidence, and ``significant`` is False when its deviation lies within its U
-    (module docstring); without them every event counts as significant."""
+    U(k = 2), confidence and ``p_noise``, and ``significant`` is False when noise alone explains
+    it (module docstring); without them every event counts as significant."""
     if not threshold_mm > 0:
         raise ValueError(f"threshold_mm must be > 0, got {threshold_mm}")
     z = np.asarray(z_mm, float)
@@ -123,18 +139,23 @@ def lumps_and_necks(z_mm, d_min_mm, d_max_mm, *, threshold_mm: float = DEFAULT_L
             continue
         dev = sign * (v - np.nanmedian(v))
         if u is not None:
-            u_scan = 1.4826 * float(np.nanmedian(np.abs(dev)))
+            d2 = np.diff(dev[np.isfinite(dev)], 2)
+            u_scan = 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / np.sqrt(6.0) \
+                if d2.size >= 3 else 0.0
             u = np.maximum(np.asarray(u, float)[order], u_scan)
             u_med = 1.2533 * float(np.nanmedian(u)) / np.sqrt(np.isfinite(v).sum())
+            n_tests = int(np.isfinite(v).sum())
         for run in _runs(np.nan_to_num(dev, nan=-np.inf) > threshold_mm):
             k = run[np.argmax(dev[run])]
             extra = {}
             if u is not None:
                 ue = float(np.hypot(u[k], u_med))
+                beta = ue * np.sqrt(6.0) / np.pi
+                p = float(-np.expm1(-np.exp(-dev[k] / beta - 0.3665))) if beta > 0 else 0.0
                 extra = {"u_mm": ue, "U_k2_mm": 2 * ue,
                          "confidence": float(norm.cdf((dev[k] - threshold_mm) / ue))
-                         if ue > 0 else 1.0,
-                         "significant": bool(dev[k] > 2 * ue)}
+                         if ue > 0 else 1.0, "p_noise": p,
+                         "significant": bool(p < FALSE_EVENT_RATE / (2 * n_tests))}
             out.append(Event(kind, float(z[run[0]]), float(z[run[-1]]),
                              float(z[run[-1]] - z[run[0]] + pitch), float(z[k]),
                              float(sign * dev[k]), [int(i) for i in ids[run]], **extra))

@@ -13,7 +13,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lts360.inspect.circles import ReferenceCircle, least_squares_circle, reference_circles
+from lts360.inspect.circles import (
+    ReferenceCircle,
+    inscribed_on_a_chord,
+    least_squares_circle,
+    reference_circles,
+)
 from lts360.inspect.diameters import Diameters, diameters
 from lts360.inspect.harmonics import DEFAULT_MAX_ORDER, Harmonics, fit_harmonics
 from lts360.inspect.profile import (
@@ -151,6 +156,10 @@ def analyse_section(xy_mm, *, index: int = 0, z_mm: float = 0.0, theta_invalid_r
     if widest > WIDE_GAP_DEG:
         warnings.append(f"a gap of {widest:.0f}°: the MCCI, MICI, two-point diameters across it "
                         f"and harmonics above order {k_max} are not determined by the points")
+    chord = inscribed_on_a_chord(pxy, circles["MICI"])
+    if chord > 0:
+        warnings.append(f"the MICI rests on the chord across a gap of {chord:.1f}°: not "
+                        f"determined by the points (its RONt and diameter are not reported)")
     n_inv = 0 if quality_invalid is None else len(quality_invalid)
     return SectionResult(
         index=int(index), z_mm=float(z_mm), n_valid=len(xy), n_samples=len(xy) + n_inv,
@@ -159,4 +168,5 @@ def analyse_section(xy_mm, *, index: int = 0, z_mm: float = 0.0, theta_invalid_r
         circles=circles, diameters=diameters(prof, gap_deg=gap_deg),
         harmonics=harm, scatter_mm=sigma,
         points_per_bin=per_bin, profile=prof, xy_mm=xy,
-        extra={"warnings": warnings, "raw_profile": raw})
+        extra={"warnings": warnings, "raw_profile": raw,
+               "undetermined": ["MICI"] if chord > 0 else []})
