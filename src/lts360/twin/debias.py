@@ -326,7 +326,10 @@ class TwinCorrector:
             return result
         entry["profile"] = {"center_mm": profile.center_mm.tolist(),
                             "coverage": profile.coverage,
-                            "largest_gap_deg": profile.largest_gap_deg}
+                            "largest_gap_deg": profile.largest_gap_deg,
+                            # the points' noise, the smoothing it asked for, the outliers dropped
+                            "noise_um": profile.noise_um, "smooth_deg": profile.smooth_deg,
+                            "n_outliers": profile.n_outliers}
         surface, axial = self._surface(k, profile)
         entry["axial"] = axial
         t0 = time.perf_counter()
