@@ -249,10 +249,13 @@ def plan_pixels(plan: InversePlan, *, margin_px: int = 4) -> np.ndarray:
     # floor(u) - 1 ... floor(u) + 2, then the margin: a box of half-widths (1 + m, 2 + m)
     # about the marked pixel, made symmetric (one pixel more on the left and top).
     r = 2 + int(margin_px)
-    from scipy.ndimage import binary_dilation
+    from scipy.ndimage import maximum_filter1d
 
-    mask = binary_dilation(mask, structure=np.ones((2 * r + 1, 2 * r + 1), bool))
-    ys, xs = np.nonzero(mask)
+    # the square box as two 1-D passes (the same pixels, a tenth of the time)
+    m = mask.view(np.uint8)
+    for axis in (0, 1):
+        m = maximum_filter1d(m, 2 * r + 1, axis=axis, mode="constant", cval=0)
+    ys, xs = np.nonzero(m)
     return np.column_stack([xs, ys])
 
 
