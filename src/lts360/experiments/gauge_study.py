@@ -375,6 +375,10 @@ def format_gauge_table(ours: dict) -> str:
     return "\n".join(lines)
 
 
+#: The reference shots of the last compensation (key: calibration, rig, noise, spp, seed, scatter).
+_SHOTS: dict = {}
+
+
 def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str, spp: int,
                              seed: int, shots: int = 1, master: bool = False,
                              bias_model: str = "none", max_scatter: int = 0) -> Path:
@@ -409,10 +413,16 @@ def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str,
     grid = CylGrid.from_ranges((r - 1.0, r + 1.0), theta_step_deg=0.1, r_step_mm=0.005)
     results = []
     for k in range(int(shots)):
-        frame = simulate_frame(load_rig(rig), obj, spp=spp, seed=seed + 777_777 + k, noise=noise,
-                               pixels_xy=gauge_window_pixels(cal_path, r),
-                               max_scatter=max_scatter)
-        res = inverse_triangulate(frame.image, cal, grid)
+        # the study's compensations (§4.4, master, master with twin) read the same shots
+        key = (str(Path(cal_path).resolve()), os.stat(cal_path).st_mtime_ns, str(rig), noise,
+               int(spp), seed + 777_777 + k, int(max_scatter))
+        if key not in _SHOTS:
+            for old in [o for o in _SHOTS if o[:5] + o[6:] != key[:5] + key[6:]]:
+                del _SHOTS[old]  # one study's shots at a time
+            _SHOTS[key] = simulate_frame(load_rig(rig), obj, spp=spp, seed=key[5], noise=noise,
+                                         pixels_xy=gauge_window_pixels(cal_path, r),
+                                         max_scatter=max_scatter).image
+        res = inverse_triangulate(_SHOTS[key], cal, grid)
         if master and bias_model == "twin":
             from lts360.twin import TwinCorrector, twin_corrected_raw
             from lts360.twin.rig import twin_design

@@ -355,9 +355,11 @@ class TwinCorrector:
             # A compensated measurement moved the twin's view by its §4.4 offset (and its
             # mastering) too: the twin is rendered through the very planes it is measured
             # with, so what corrects those planes' errors in the real image is no bias of its.
-            exact = ray_radii(_compensated(verts, plan.cal, name,
-                                           getattr(twin, "compensated", False)),
-                              tv.theta_rad, near_mm=tv.r_mm)
+            exact = np.full(np.shape(tv.r_mm), np.nan)
+            exact[tv.valid] = ray_radii(_compensated(verts, plan.cal, name,
+                                                     getattr(twin, "compensated", False)),
+                                        np.asarray(tv.theta_rad)[tv.valid],
+                                        near_mm=np.asarray(tv.r_mm)[tv.valid])
             b = np.where(tv.valid, tv.r_mm - exact, np.nan)
             b_s, count = _nan_smooth(b, size, wrap)
             ok = v.valid & np.isfinite(b_s)
