@@ -157,6 +157,10 @@ def test_monte_carlo_compensates_nominal_and_drawn_calibrations_alike(tmp_path,
     cal = _nominal_calibration(str(path), str(renders), "paper", 2.0)
     assert set(cal.view_offsets_mm) == {"left", "right"}
     assert max(np.abs(v).max() for v in cal.view_offsets_mm.values()) > 0
+    # Mastered with the gauge's known diameter on the same (noise-free) reference image: the
+    # size is set by the master, where §4.4 alone fits the radius freely.
+    mastered = mc_trial(Trial(1, dict(base, vary="placement", master=True), 12)).values["y_um"]
+    assert abs(mastered) < 1.0 and abs(mastered) < abs(nominal) - 1.0
     # Several reference shots: the same first shot and more, so another compensation.
     four = mc_trial(Trial(2, dict(base, vary="compensation", compensation_shots=4), 13))
     assert np.isfinite(four.values["y_um"]) and abs(four.values["y_um"] - noisy) > 1e-4

@@ -104,6 +104,8 @@ def _add_monte_carlo(studies) -> None:
                    help="trials per input in the one-at-a-time runs")
     q.add_argument("--placements", type=int, default=8, help="rendered gauge placements")
     q.add_argument("--no-compensate", action="store_true", help="no §4.4 compensation")
+    q.add_argument("--master", action="store_true",
+                   help="every compensation mastered with the gauge's known diameter")
     q.add_argument("--compensation-shots", type=int, default=1, metavar="K",
                    help="images of the reference placement each §4.4 compensation is fitted "
                    "to (default 1, as the paper)")

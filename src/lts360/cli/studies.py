@@ -93,6 +93,8 @@ def cmd_study_monte_carlo(args) -> int:
         raise UsageError(f"--digits: must be in [1, 4], got {args.digits}")
     _check_shots(args.compensation_shots)
     _check_placement(args.placement_mm)
+    if args.master and args.no_compensate:
+        raise UsageError("--master: the mastering is a compensation; drop --no-compensate")
     _optional_file(args.calibration, "--calibration")
     _study_rig(args.rig)
     _set_variant(args.variant)
@@ -104,6 +106,7 @@ def cmd_study_monte_carlo(args) -> int:
     summary = run_monte_carlo_study(out, calibration=cal, trials=args.trials, rig=args.rig,
                                     compensate=not args.no_compensate,
                                     compensation_shots=args.compensation_shots,
+                                    master=args.master,
                                     adaptive=args.adaptive, batch=args.batch, n_dig=args.digits,
                                     sensitivity_trials=args.sensitivity_trials,
                                     placements=args.placements, placement_mm=args.placement_mm,
