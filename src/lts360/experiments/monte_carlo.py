@@ -49,6 +49,11 @@ noise — while drawn ones were compensated on the noise-free reference placemen
 calibration-only run's mean sat 9 µm from the others'.  That gap is one compensation's own
 noise: the ``compensation`` input.
 
+With ``master`` (``--master``) every compensation, nominal and drawn, is mastered with the
+gauge's known diameter (:func:`~lts360.recon.calibration.compensation.master_fit`: per view a
+radial offset too), so a drawn calibration's size error is absorbed.  The twin is not part of
+the trials.
+
 Sensitivity: "one at a time" runs where only one input varies (the others at their nominal
 value: the estimated calibration, no noise, no speckle, the first placement, ΔT = 0) give each
 input's contribution u_i; the GUM budget combines them as √Σu_i² (independent inputs,
