@@ -34,6 +34,7 @@ def run(*args):
     (("study", "plug-gauge", "--out", "s", "--compensation-shots", "101"), "--compensation-shots"),
     (("study", "plug-gauge", "--out", "s", "--rig", "no-such-rig.toml"), "no-such-rig.toml"),
     (("study", "plug-gauge", "--out", "s", "--placement-mm", "-1"), "--placement-mm"),
+    (("study", "monte-carlo", "--out", "s", "--master", "--no-compensate"), "--master"),
     (("study", "monte-carlo", "--out", "s", "--placement-mm", "11"), "--placement-mm"),
     (("measure", "f", "--calibration", "c.json", "--out", "c.ply", "--reject", "maybe"),
      "--reject"),

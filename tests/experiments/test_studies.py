@@ -86,15 +86,27 @@ mi = pytest.importorskip("mitsuba", reason="the study runs render")
 
 @pytest.mark.slow
 def test_plug_gauge_study_end_to_end(tmp_path, truth_calibration):
-    from lts360.experiments.gauge_study import run_plug_gauge_study
+    """The study as a user measures by default (§4.4, mastered with the gauge's diameter, each
+    placement corrected by its twin), with each step on and off on the same images."""
+    from lts360.experiments.gauge_study import STEPS, format_gauge_table, run_plug_gauge_study
 
     table = run_plug_gauge_study(tmp_path, trials=2, calibration=truth_calibration, noise="none",
                                  say=lambda *_: None)
     assert table["n_measurements"] == 2 and table["mean_coverage_deg"] > 355.0
-    # True calibration, no noise: a few µm (sheet bias and the §4.4 compensation, see STUDIES.md).
-    assert abs(table["mean_radius_error_mm"]) < 0.015 and table["worst_std_mm"] < 0.015
-    for name in ("table.txt", "plug-gauge.png", "calibration-compensated.json"):
-        assert (tmp_path / name).is_file()
+    # True calibration, no noise, master and twin: within 3 µm (see STUDIES.md).
+    assert table["ours"] == "c44_master_twin"
+    assert abs(table["mean_radius_error_mm"]) < 0.003 and table["worst_std_mm"] < 0.015
+    steps = table["steps"]
+    assert list(steps) == [k for k, _, _ in STEPS]
+    # ours is one of the steps, measured once: the same numbers
+    assert steps["c44_master_twin"]["mean_radius_error_mm"] == table["mean_radius_error_mm"]
+    # §4.4 alone fits the radius freely: its size error is the sheet's bias, several µm
+    assert abs(steps["c44"]["mean_radius_error_mm"]) > abs(table["mean_radius_error_mm"])
+    text = format_gauge_table(table)
+    assert "§4.4 + master + twin" in text and "<- lts360" in text
+    for name in ("table.txt", "plug-gauge.png", "calibration-compensated.json",
+                 "calibration-compensated-master.json", "calibration-compensated-master-twin.json"):
+        assert (tmp_path / name).is_file(), name
     assert len(list((tmp_path / "clouds").glob("*.ply"))) == 2
 
 
@@ -145,6 +157,10 @@ def test_monte_carlo_compensates_nominal_and_drawn_calibrations_alike(tmp_path,
     cal = _nominal_calibration(str(path), str(renders), "paper", 2.0)
     assert set(cal.view_offsets_mm) == {"left", "right"}
     assert max(np.abs(v).max() for v in cal.view_offsets_mm.values()) > 0
+    # Mastered with the gauge's known diameter on the same (noise-free) reference image: the
+    # size is set by the master, where §4.4 alone fits the radius freely.
+    mastered = mc_trial(Trial(1, dict(base, vary="placement", master=True), 12)).values["y_um"]
+    assert abs(mastered) < 1.0 and abs(mastered) < abs(nominal) - 1.0
     # Several reference shots: the same first shot and more, so another compensation.
     four = mc_trial(Trial(2, dict(base, vary="compensation", compensation_shots=4), 13))
     assert np.isfinite(four.values["y_um"]) and abs(four.values["y_um"] - noisy) > 1e-4
@@ -177,16 +193,18 @@ def test_the_gauge_study_masters_with_the_gauge_diameter(tmp_path, truth_calibra
 
 
 @pytest.mark.slow
-def test_plug_gauge_study_with_master_and_twin(tmp_path, truth_calibration):
-    """The study as a user measures: mastered with the gauge's diameter, each placement
-    corrected by its twin (noise-free, true calibration: the mean within 3 µm)."""
+def test_plug_gauge_study_the_papers_method_alone(tmp_path, truth_calibration):
+    """Each step switches off: §4.4 alone (the paper's method), no steps measured."""
     from lts360.experiments.gauge_study import run_plug_gauge_study
 
     table = run_plug_gauge_study(tmp_path, trials=2, calibration=truth_calibration, noise="none",
-                                 master=True, bias_model="twin", say=lambda *_: None)
-    assert table["n_measurements"] == 2
-    assert abs(table["mean_radius_error_mm"]) < 0.003
-    assert (tmp_path / "calibration-compensated-master-twin.json").is_file()
+                                 master=False, bias_model="none", steps=False,
+                                 say=lambda *_: None)
+    assert table["n_measurements"] == 2 and table["ours"] == "c44" and "steps" not in table
+    # True calibration, no noise: a few µm (sheet bias and the §4.4 compensation).
+    assert abs(table["mean_radius_error_mm"]) < 0.015 and table["worst_std_mm"] < 0.015
+    assert (tmp_path / "calibration-compensated.json").is_file()
+    assert not list(tmp_path.glob("calibration-compensated-master*.json"))
 
 
 def test_examples_and_algorithms_studies_end_to_end(tmp_path):

@@ -524,3 +524,31 @@ def test_the_twin_of_a_perturbed_calibration_corrects_as_the_true_one(small_gaug
     old = _view_corrections(_perturbed_calibration(cal, offset_mm=0.0), small_gauge_frame)
     assert max(abs(old[n]["mean_bias_um"] - true[n]["mean_bias_um"])
                for n in ("left", "right")) > 30.0  # measured: 69 and 60 µm
+
+
+def test_a_noisy_profile_is_smoothed_to_its_noise_and_loses_its_outliers():
+    """Speckle-like noise (σ 30 µm, correlated over ~1°, 2 % spikes of 0.3 mm) on a circle: the
+    profile widens its smoothing until the noise is averaged down and drops the spikes; the
+    same points without noise keep the 1° profile, a groove's flank included."""
+    rng = np.random.default_rng(4)
+    n = 4400
+    phi = np.sort(rng.uniform(0, 2 * np.pi, n))
+    corr = np.convolve(rng.normal(0, 1, n + 11), np.ones(12) / np.sqrt(12), "valid")[:n]
+    spikes = np.where(rng.uniform(size=n) < 0.02, 0.3, 0.0)
+    groove = np.where(np.abs(phi - 1.0) < 0.05, -0.2, 0.0)  # a 0.2 mm deep, 5.7° wide groove
+    rho = 10.0 + groove
+
+    def pts(r):
+        return np.column_stack([r * np.cos(phi), r * np.sin(phi)])
+
+    clean = section_profile(pts(rho))
+    # only points at the ideal step, in the one bin that straddles it, are off the profile
+    assert clean.smooth_deg == 1.0 and clean.n_outliers <= 0.005 * n
+    k = np.argmin(np.abs(clean.phi_rad - 1.0))
+    assert clean.rho_mm[k] == pytest.approx(9.8, abs=0.01)  # the groove is kept
+    noisy = section_profile(pts(10.0 + 0.03 * corr + spikes))
+    assert noisy.smooth_deg > 10.0 and noisy.n_outliers >= 0.8 * int((spikes > 0).sum())
+    assert 5.0 < noisy.noise_um < 45.0  # about the 1° profile, which follows correlated noise
+    assert np.std(noisy.rho_mm) < 8e-3  # 30 µm of noise: a few µm left
+    old = section_profile(pts(10.0 + 0.03 * corr + spikes), noise_target_um=None)
+    assert np.std(old.rho_mm) > 3 * np.std(noisy.rho_mm) and old.smooth_deg == 1.0

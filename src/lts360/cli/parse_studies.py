@@ -65,13 +65,27 @@ def _add_plug_gauge(studies) -> None:
     q.add_argument("--placement-mm", type=float, default=0.3, metavar="R",
                    help="placements drawn uniformly in a disc of radius R mm about the axis "
                    "(default 0.3); results are also reported against the distance from it")
-    q.add_argument("--master", action="store_true",
-                   help="master the compensation with the gauge's known diameter")
-    q.add_argument("--bias-model", choices=("none", "twin"), default="none",
-                   help="twin: each placement (and the master's shots) corrected by its twin")
+    _add_user_steps(q)
     q.add_argument("--max-scatter", type=int, choices=tuple(range(MAX_SCATTER + 1)), default=0,
                    help="interreflections of the laser light in the gauge's images (default 0)")
     q.set_defaults(func=cmd_study_plug_gauge)
+
+
+def _add_user_steps(q) -> None:
+    """The steps a user measures with (plug-gauge study and demo), each switchable."""
+    import argparse
+
+    q.add_argument("--no-compensate", dest="compensate", action="store_false",
+                   help="no §4.4 compensation (and so no master)")
+    q.add_argument("--master", action=argparse.BooleanOptionalAction, default=True,
+                   help="master the compensation with the gauge's known diameter (default on; "
+                   "--no-master: §4.4 alone, the paper's method)")
+    q.add_argument("--bias-model", choices=("none", "twin"), default="twin",
+                   help="twin (default): each placement (and the master's shots) corrected by "
+                   "its twin; none: no line-centre bias correction")
+    q.add_argument("--no-steps", dest="steps", action="store_false",
+                   help="measure each placement only as configured (default: also with each "
+                   "step on and off, for the table of steps)")
 
 
 def _add_monte_carlo(studies) -> None:
@@ -90,6 +104,8 @@ def _add_monte_carlo(studies) -> None:
                    help="trials per input in the one-at-a-time runs")
     q.add_argument("--placements", type=int, default=8, help="rendered gauge placements")
     q.add_argument("--no-compensate", action="store_true", help="no §4.4 compensation")
+    q.add_argument("--master", action="store_true",
+                   help="every compensation mastered with the gauge's known diameter")
     q.add_argument("--compensation-shots", type=int, default=1, metavar="K",
                    help="images of the reference placement each §4.4 compensation is fitted "
                    "to (default 1, as the paper)")
@@ -208,5 +224,6 @@ def add_demo_parser(sub) -> None:
     s.add_argument("--quick", action="store_true", help="skip the calibration and the "
                    "plug-gauge study (a few seconds instead of minutes)")
     s.add_argument("--gauge-trials", type=int, default=10, help="plug-gauge placements")
+    _add_user_steps(s)
     s.add_argument("--seed", type=int, default=0)
     s.set_defaults(func=cmd_demo)

@@ -70,7 +70,8 @@ def cmd_study_plug_gauge(args) -> int:
                                  noise=args.noise, spp=args.spp, rig=args.rig,
                                  compensation_shots=args.compensation_shots,
                                  placement_mm=args.placement_mm, master=args.master,
-                                 bias_model=args.bias_model, workers=args.workers or 1,
+                                 bias_model=args.bias_model, compensate=args.compensate,
+                                 steps=args.steps, workers=args.workers or 1,
                                  max_scatter=args.max_scatter, **common)
     print(format_gauge_table(table))
     print(f"wrote {args.out}/ (table.txt, table.json, plug-gauge.png, trials/results.nc)")
@@ -92,6 +93,8 @@ def cmd_study_monte_carlo(args) -> int:
         raise UsageError(f"--digits: must be in [1, 4], got {args.digits}")
     _check_shots(args.compensation_shots)
     _check_placement(args.placement_mm)
+    if args.master and args.no_compensate:
+        raise UsageError("--master: the mastering is a compensation; drop --no-compensate")
     _optional_file(args.calibration, "--calibration")
     _study_rig(args.rig)
     _set_variant(args.variant)
@@ -103,6 +106,7 @@ def cmd_study_monte_carlo(args) -> int:
     summary = run_monte_carlo_study(out, calibration=cal, trials=args.trials, rig=args.rig,
                                     compensate=not args.no_compensate,
                                     compensation_shots=args.compensation_shots,
+                                    master=args.master,
                                     adaptive=args.adaptive, batch=args.batch, n_dig=args.digits,
                                     sensitivity_trials=args.sensitivity_trials,
                                     placements=args.placements, placement_mm=args.placement_mm,
@@ -192,7 +196,9 @@ def cmd_demo(args) -> int:
     if not 1 <= args.gauge_trials <= 1000:
         raise UsageError(f"--gauge-trials: must be in [1, 1000], got {args.gauge_trials}")
     run_demo(Path(args.out), radius_mm=args.radius_mm, render=render, paper=not args.quick,
-             gauge_trials=args.gauge_trials, seed=args.seed)
+             gauge_trials=args.gauge_trials, seed=args.seed,
+             gauge_options={"compensate": args.compensate, "master": args.master,
+                            "bias_model": args.bias_model, "steps": args.steps})
     return 0
 
 

@@ -8,6 +8,13 @@ measurement of the gauge at the nominal position).  Each measurement gives, as i
 a circle fit and the radius of every point about the fitted centre: the radius error (fitted
 minus true radius) and the standard deviation of the point radii.
 
+By default the study measures as a user of the rig would: beside §4.4 the compensation is
+mastered with the gauge's known diameter (one Ø20 master, :func:`~lts360.recon.calibration.
+compensation.master_fit`) and each placement's line-centre bias is removed by its twin
+(:mod:`lts360.twin`); each is switchable (``master``, ``bias_model``).  Every placement's
+image is also measured with each step on and off (:data:`STEPS`, the same image), so the
+table shows the paper's method (§4.4 alone) beside ours and U with and without each step.
+
 The table puts the paper's numbers beside ours: mean radius error, worst-case standard
 deviation, the temperature and resolution terms, the combined expanded uncertainty (k = 2)
 and the maximum error |mean| + U.  The recipe is the paper's: U = k·√(s_worst² + u_T² + u_res²),
@@ -27,7 +34,7 @@ import numpy as np
 
 from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study, trial_setup
 
-__all__ = ["GAUGE_DIAMETER_MM", "DEFAULT_PLACEMENT_MM", "placement_band_mm", "by_offset",
+__all__ = ["GAUGE_DIAMETER_MM", "STEPS", "DEFAULT_PLACEMENT_MM", "placement_band_mm", "by_offset",
            "PAPER_TABLE", "gauge_placements", "plug_gauge_trial",
            "gauge_table", "run_plug_gauge_study", "measure_gauge_image", "format_gauge_table",
            "ensure_calibration"]
@@ -42,6 +49,13 @@ STEEL_ALPHA_PER_K = 11.5e-6
 DELTA_T_K = 5.0
 RESOLUTION_MM = 0.001
 VIEWS = ("direct", "left", "right")
+#: The steps every placement is measured with (``steps=True``): key, label, (§4.4, master,
+#: bias model).  The master is the gauge itself at the nominal position (its known diameter).
+STEPS = (("none", "no compensation", (False, False, "none")),
+         ("c44", "§4.4 (the paper's method)", (True, False, "none")),
+         ("c44_master", "§4.4 + master", (True, True, "none")),
+         ("c44_twin", "§4.4 + twin", (True, False, "twin")),
+         ("c44_master_twin", "§4.4 + master + twin", (True, True, "twin")))
 #: Radius (mm) of the disc the gauge's placements are drawn in (a V-block put back by hand).
 DEFAULT_PLACEMENT_MM = 0.3
 
@@ -215,8 +229,17 @@ def measure_gauge_image(image, cal_path: str, *, r_true_mm: float, band_mm: floa
     return out
 
 
+def _step_key(compensate: bool, master: bool, bias_model: str) -> str | None:
+    """The :data:`STEPS` key of a configuration (None: not one of them)."""
+    for key, _, conf in STEPS:
+        if conf == (bool(compensate), bool(master) and bool(compensate), bias_model):
+            return key
+    return None
+
+
 def plug_gauge_trial(trial: Trial) -> TrialOutput:
-    """Render the gauge at the trial's placement (realistic noise) and measure it."""
+    """Render the gauge at the trial's placement (realistic noise) and measure it: with the
+    study's configuration and, with ``steps``, with each of :data:`STEPS` (the same image)."""
     from lts360.simulator.frame import simulate_frame
 
     p = trial.params
@@ -229,22 +252,35 @@ def plug_gauge_trial(trial: Trial) -> TrialOutput:
                            pixels_xy=gauge_window_pixels(p["calibration"], r_mm, band_mm=band),
                            max_scatter=int(p.get("max_scatter", 0)))
     cloud = Path(p["clouds"]) / f"placement_{trial.index:02d}.ply" if p.get("clouds") else None
-    m = measure_gauge_image(frame.image, p["calibration"], r_true_mm=r_mm, band_mm=band,
-                            compensate=bool(p["compensate"]), cloud_path=cloud,
-                            bias_model=p.get("bias_model", "none"))
+    ours_key = _step_key(bool(p["compensate"]), bool(p.get("master", False)),
+                         p.get("bias_model", "none"))
+    steps = {}
+    if p.get("steps"):
+        for key, _, (comp, _, bias) in STEPS:
+            steps[key] = measure_gauge_image(
+                frame.image, p[f"cal_{key}"], r_true_mm=r_mm, band_mm=band, compensate=comp,
+                bias_model=bias, cloud_path=cloud if key == ours_key else None)
+    m = steps.get(ours_key) if ours_key in steps else measure_gauge_image(
+        frame.image, p["calibration"], r_true_mm=r_mm, band_mm=band,
+        compensate=bool(p["compensate"]), cloud_path=cloud,
+        bias_model=p.get("bias_model", "none"))
+    m = dict(m)
     m["offset_mm"] = float(np.hypot(obj.placement.x_mm, obj.placement.y_mm))
     arrays = {k: m.pop(k) for k in ("view_mean_mm", "view_std_mm", "view_n") if k in m}
     values = {k: float(v) for k, v in m.items()}
     values.update(arrays)
     dims = {k: ("view",) for k in arrays}
-    return TrialOutput(values=values, dims=dims,
-                       coords={"view": np.array(VIEWS)} if arrays else {})
+    coords = {"view": np.array(VIEWS)} if arrays else {}
+    if steps:
+        for name in ("radius_error_mm", "point_std_mm", "form_range_mm"):
+            values[f"step_{name}"] = np.array([steps[k].get(name, np.nan) for k, _, _ in STEPS])
+            dims[f"step_{name}"] = ("step",)
+        coords["step"] = np.array([k for k, _, _ in STEPS])
+    return TrialOutput(values=values, dims=dims, coords=coords)
 
 
-def gauge_table(ds) -> dict:
-    """The §4.5 table from the study's results (mm)."""
-    err = np.asarray(ds["radius_error_mm"].values, float)
-    std = np.asarray(ds["point_std_mm"].values, float)
+def _uncertainty(err: np.ndarray, std: np.ndarray, form: np.ndarray | None) -> dict:
+    """The paper's recipe on radius errors ``err`` and point-radius stds ``std`` (mm)."""
     d = GAUGE_DIAMETER_MM
     temp_mm = STEEL_ALPHA_PER_K * d * DELTA_T_K  # diameter change over ±5 K
     u_t = (temp_mm / 2.0) / math.sqrt(3.0)  # radius, rectangular
@@ -252,35 +288,80 @@ def gauge_table(ds) -> dict:
     s_worst = float(np.nanmax(std))
     U = 2.0 * math.sqrt(s_worst**2 + u_t**2 + u_res**2)
     mean = float(np.nanmean(err))
-    vdi = {}
-    if "form_range_mm" in ds:
+    out = {"mean_radius_error_mm": mean, "worst_std_mm": s_worst, "temperature_mm": temp_mm,
+           "resolution_mm": RESOLUTION_MM, "expanded_uncertainty_mm": U,
+           "max_error_mm": abs(mean) + U}
+    if form is not None:
         # VDI/VDE 2634-2 style: probing error form P_F (range of the radial residuals about the
         # fitted circle) and size P_S (diameter error), the worst over the placements.
-        vdi = {"probing_form_PF_mm": float(np.nanmax(ds["form_range_mm"].values)),
-               "probing_size_PS_mm": float(2.0 * err[np.nanargmax(np.abs(err))])}
-    return {**vdi, "n_measurements": int(np.isfinite(err).sum()), "mean_radius_error_mm": mean,
-            "std_of_radius_error_mm": float(np.nanstd(err, ddof=1)) if err.size > 1 else None,
-            "worst_std_mm": s_worst, "temperature_mm": temp_mm, "resolution_mm": RESOLUTION_MM,
-            "expanded_uncertainty_mm": U, "max_error_mm": abs(mean) + U,
-            "mean_coverage_deg": float(np.nanmean(ds["coverage_deg"].values)),
-            "by_offset": by_offset(ds)}
+        out.update(probing_form_PF_mm=float(np.nanmax(form)),
+                   probing_size_PS_mm=float(2.0 * err[np.nanargmax(np.abs(err))]))
+    return out
+
+
+def gauge_table(ds) -> dict:
+    """The §4.5 table from the study's results (mm); with the steps measured, ``steps``: the
+    same table per step of :data:`STEPS` (the same images)."""
+    err = np.asarray(ds["radius_error_mm"].values, float)
+    std = np.asarray(ds["point_std_mm"].values, float)
+    form = np.asarray(ds["form_range_mm"].values, float) if "form_range_mm" in ds else None
+    table = _uncertainty(err, std, form)
+    table.update({"n_measurements": int(np.isfinite(err).sum()),
+                  "std_of_radius_error_mm": float(np.nanstd(err, ddof=1)) if err.size > 1
+                  else None,
+                  "mean_coverage_deg": float(np.nanmean(ds["coverage_deg"].values)),
+                  "by_offset": by_offset(ds)})
+    if "step_radius_error_mm" in ds:
+        keys = [str(k) for k in ds["step"].values]
+        labels = {k: label for k, label, _ in STEPS}
+        table["steps"] = {}
+        for j, key in enumerate(keys):
+            e = np.asarray(ds["step_radius_error_mm"].values, float)[:, j]
+            table["steps"][key] = dict(
+                _uncertainty(e, np.asarray(ds["step_point_std_mm"].values, float)[:, j],
+                             np.asarray(ds["step_form_range_mm"].values, float)[:, j]),
+                label=labels.get(key, key))
+    if ds.attrs.get("ours"):
+        table["ours"] = str(ds.attrs["ours"])
+    return table
 
 
 def format_gauge_table(ours: dict) -> str:
+    """The §4.5 table: the paper's published column, then ours; with the steps measured, the
+    paper's method (§4.4 alone) on our images between them, and a table of the steps."""
     rows = [("mean radius error", "mean_radius_error_mm", "{:+.4f}"),
             ("worst-case std of the point radii", "worst_std_mm", "{:.4f}"),
             ("gauge diameter change, ±5 °C", "temperature_mm", "±{:.4f}"),
             ("resolution", "resolution_mm", "{:.4f}"),
             ("expanded uncertainty U (k = 2)", "expanded_uncertainty_mm", "±{:.4f}"),
             ("maximum error |mean| + U", "max_error_mm", "±{:.4f}")]
-    lines = [f"{'plug gauge Ø19.9987 mm (mm)':38s} {'paper':>9s} {'lts360':>9s}"]
+    steps = ours.get("steps") or {}
+    cols = [("paper", PAPER_TABLE)]
+    if "c44" in steps and ours.get("ours") != "c44":
+        cols.append(("§4.4", steps["c44"]))
+    cols.append(("lts360", ours))
+    lines = [f"{'plug gauge Ø19.9987 mm (mm)':38s} " + " ".join(f"{c:>9s}" for c, _ in cols)]
     for label, key, fmt in rows:
-        lines.append(f"{label:38s} {fmt.format(PAPER_TABLE[key]):>9s} {fmt.format(ours[key]):>9s}")
-    if "probing_form_PF_mm" in ours:
-        lines.append(f"{'VDI/VDE 2634-2: probing form P_F (worst)':38s} {'—':>9s} "
-                     f"{ours['probing_form_PF_mm']:9.4f}")
-        lines.append(f"{'VDI/VDE 2634-2: probing size P_S (worst)':38s} {'—':>9s} "
-                     f"{ours['probing_size_PS_mm']:+9.4f}")
+        lines.append(f"{label:38s} " + " ".join(f"{fmt.format(t[key]):>9s}" for _, t in cols))
+    for label, key, fmt in (("VDI/VDE 2634-2: probing form P_F (worst)", "probing_form_PF_mm",
+                             "{:9.4f}"),
+                            ("VDI/VDE 2634-2: probing size P_S (worst)", "probing_size_PS_mm",
+                             "{:+9.4f}")):
+        if key in ours:
+            lines.append(f"{label:38s} " + " ".join(
+                f"{'—':>9s}" if key not in t else fmt.format(t[key]) for _, t in cols))
+    if ours.get("ours"):
+        lines.append(f"(lts360: {dict((k, lb) for k, lb, _ in STEPS).get(ours['ours'], ours['ours'])}"
+                     + ("; §4.4: the paper's method on the same images)" if len(cols) == 3
+                        else ")"))
+    if steps:
+        lines.append("each step on the same images (µm): mean radius error, worst std, "
+                     "U (k = 2), maximum error, P_F")
+        for key, t in steps.items():
+            mark = "  <- lts360" if key == ours.get("ours") else ""
+            lines.append(f"  {t['label']:28s} {1e3 * t['mean_radius_error_mm']:+7.1f} "
+                         f"{1e3 * t['worst_std_mm']:6.1f} ±{1e3 * t['expanded_uncertainty_mm']:5.1f} "
+                         f"±{1e3 * t['max_error_mm']:5.1f} {1e3 * t['probing_form_PF_mm']:6.1f}{mark}")
     if ours.get("by_offset"):
         lines.append("against the distance from the axis (mm): placements, mean radius error, "
                      "spread of the views' mean errors")
@@ -292,6 +373,10 @@ def format_gauge_table(ours: dict) -> str:
                  f"{ours['mean_coverage_deg']:.1f}°; the paper's temperature term is its own "
                  "figure, ours is α·d·ΔT for steel)")
     return "\n".join(lines)
+
+
+#: The reference shots of the last compensation (key: calibration, rig, noise, spp, seed, scatter).
+_SHOTS: dict = {}
 
 
 def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str, spp: int,
@@ -328,10 +413,16 @@ def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str,
     grid = CylGrid.from_ranges((r - 1.0, r + 1.0), theta_step_deg=0.1, r_step_mm=0.005)
     results = []
     for k in range(int(shots)):
-        frame = simulate_frame(load_rig(rig), obj, spp=spp, seed=seed + 777_777 + k, noise=noise,
-                               pixels_xy=gauge_window_pixels(cal_path, r),
-                               max_scatter=max_scatter)
-        res = inverse_triangulate(frame.image, cal, grid)
+        # the study's compensations (§4.4, master, master with twin) read the same shots
+        key = (str(Path(cal_path).resolve()), os.stat(cal_path).st_mtime_ns, str(rig), noise,
+               int(spp), seed + 777_777 + k, int(max_scatter))
+        if key not in _SHOTS:
+            for old in [o for o in _SHOTS if o[:5] + o[6:] != key[:5] + key[6:]]:
+                del _SHOTS[old]  # one study's shots at a time
+            _SHOTS[key] = simulate_frame(load_rig(rig), obj, spp=spp, seed=key[5], noise=noise,
+                                         pixels_xy=gauge_window_pixels(cal_path, r),
+                                         max_scatter=max_scatter).image
+        res = inverse_triangulate(_SHOTS[key], cal, grid)
         if master and bias_model == "twin":
             from lts360.twin import TwinCorrector, twin_corrected_raw
             from lts360.twin.rig import twin_design
@@ -384,32 +475,46 @@ def run_plug_gauge_study(out_dir, *, trials: int = 10, seed: int = 0, calibratio
                          compensate: bool = True, workers: int | None = 1,
                          dask_address: str | None = None, calibrate_options: dict | None = None,
                          compensation_shots: int = 1, placement_mm: float = DEFAULT_PLACEMENT_MM,
-                         master: bool = False, bias_model: str = "none", say=print,
-                         max_scatter: int = 0) -> dict:
+                         master: bool = True, bias_model: str = "twin", steps: bool = True,
+                         say=print, max_scatter: int = 0) -> dict:
     """Calibrate (unless ``calibration``), compensate, measure ``trials`` placements (offsets
     drawn in a disc of radius ``placement_mm``), tabulate (also against the offset).
-    ``master``: the compensation mastered with the gauge's known diameter; ``bias_model``
-    ``"twin"``: each placement (and the master's shots) corrected by its twin.
+    ``compensate``: §4.4; ``master``: the compensation mastered with the gauge's known
+    diameter (needs ``compensate``); ``bias_model`` ``"twin"``: each placement (and the
+    master's shots) corrected by its twin.  ``steps``: each placement also measured with
+    every step of :data:`STEPS` on and off (the table's ``steps``).
     ``max_scatter`` > 0 renders the gauge's shots (compensation and placements, not the
     chessboards) with interreflected laser light."""
     if bias_model not in ("none", "twin"):
         raise ValueError(f"bias_model must be none or twin, got {bias_model!r}")
     placement_band_mm(placement_mm)  # validates
+    master = bool(master) and bool(compensate)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    calibration = ensure_calibration(out, calibration, rig=rig, noise=noise, seed=seed, spp=spp,
-                                     compensate=compensate, calibrate_options=calibrate_options,
-                                     compensation_shots=compensation_shots, master=master,
-                                     bias_model=bias_model, say=say, max_scatter=max_scatter)
+    kw = dict(rig=rig, noise=noise, seed=seed, spp=spp, calibrate_options=calibrate_options,
+              compensation_shots=compensation_shots, say=say, max_scatter=max_scatter)
+    raw = ensure_calibration(out, calibration, compensate=False, **kw)
+    if bias_model == "twin" or steps:
+        from lts360.recon.model import load_calibration
+        from lts360.twin.rig import twin_design
+
+        twin_design(load_calibration(raw))  # one line if the calibration records no optics
+    cals = {}
+    for key, _, (comp, mast, bias) in (STEPS if steps else ()):
+        cals[f"cal_{key}"] = str(ensure_calibration(out, raw, compensate=comp, master=mast,
+                                                    bias_model=bias, **kw).resolve())
+    calibration = ensure_calibration(out, raw, compensate=compensate, master=master,
+                                     bias_model=bias_model, **kw)
     params = [dict(p, calibration=str(calibration.resolve()), noise=noise, spp=spp, rig=rig,
                    compensate=compensate, bias_model=bias_model, clouds=str((out / "clouds").resolve()),
-                   placement_mm=float(placement_mm))
+                   placement_mm=float(placement_mm), master=master, steps=bool(steps), **cals)
               for p in gauge_placements(trials, seed, offset_mm=placement_mm)]
     if max_scatter:  # only then: the trials of earlier studies keep their parameters
         params = [dict(p, max_scatter=int(max_scatter)) for p in params]
+    ours = _step_key(compensate, master, bias_model)
     ds = run_study(out / "trials", plan_trials(params, seed), plug_gauge_trial, name="plug-gauge",
                    workers=workers, dask_address=dask_address,
-                   attrs={"noise": noise, "spp": spp, "rig": rig})
+                   attrs={"noise": noise, "spp": spp, "rig": rig, "ours": ours or ""})
     table = gauge_table(ds)
     table["paper"] = PAPER_TABLE
     (out / "table.json").write_text(json.dumps(table, indent=2))

@@ -49,6 +49,11 @@ noise — while drawn ones were compensated on the noise-free reference placemen
 calibration-only run's mean sat 9 µm from the others'.  That gap is one compensation's own
 noise: the ``compensation`` input.
 
+With ``master`` (``--master``) every compensation, nominal and drawn, is mastered with the
+gauge's known diameter (:func:`~lts360.recon.calibration.compensation.master_fit`: per view a
+radial offset too), so a drawn calibration's size error is absorbed.  The twin is not part of
+the trials.
+
 Sensitivity: "one at a time" runs where only one input varies (the others at their nominal
 value: the estimated calibration, no noise, no speckle, the first placement, ΔT = 0) give each
 input's contribution u_i; the GUM budget combines them as √Σu_i² (independent inputs,
@@ -171,12 +176,14 @@ def _calibration(path: str):
 
 def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
                 noise_seed: int | None = None, shots: int = 1,
-                placement_mm: float = DEFAULT_PLACEMENT_MM):
+                placement_mm: float = DEFAULT_PLACEMENT_MM, master: bool = False):
     """``cal`` with the §4.4 view offsets measured with it on the reference placement
     (``placement_00``), whatever offsets ``cal`` held.  The reference image is noise-free, or
     with ``noise_seed`` has realistic sensor noise and a speckle pattern drawn from it; then
     ``shots`` such images (the gauge turned between them: a new speckle pattern each) are
-    fitted jointly."""
+    fitted jointly.  ``master``: the fit knows the gauge's diameter
+    (:func:`~lts360.recon.calibration.compensation.master_fit`: per view a radial offset
+    too)."""
     from types import SimpleNamespace
 
     from lts360.recon.calibration.compensation import joint_view_offsets
@@ -187,7 +194,8 @@ def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
     Y0, L0, _ = _placement(str(Path(renders) / "placement_00"))
     noisy = noise_seed is not None
     rig = load_rig(rig_name)
-    cal = dataclasses.replace(cal, view_offsets_mm={})
+    cal = dataclasses.replace(cal, view_offsets_mm={}, view_radial_offsets_mm={},
+                              view_scales={}, master={})
     results = []
     for j in range(int(shots) if noisy else 1):  # noise-free shots would all be the same
         s = int(noise_seed) + 2 * j if noisy else 0
@@ -195,16 +203,29 @@ def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
                                  noise="realistic" if noisy else "none", seed=s, speckle=noisy,
                                  speckle_seed=s + 1 if noisy else None)
         results.append(inverse_triangulate(ref, cal, _grid(theta_step_deg, placement_mm)))
+    if master:
+        from lts360.recon.calibration.compensation import master_fit
+
+        fit = master_fit(results, GAUGE_DIAMETER_MM)
+        return dataclasses.replace(cal, view_offsets_mm=fit.offsets_mm,
+                                   view_radial_offsets_mm=fit.radial_offset_mm,
+                                   view_scales=fit.scale, master=fit.to_dict())
     offsets = joint_view_offsets(results)
     return dataclasses.replace(cal, view_offsets_mm=offsets)
 
 
 @functools.lru_cache(maxsize=2)
 def _nominal_calibration(path: str, renders: str, rig_name: str, theta_step_deg: float,
-                         placement_mm: float = DEFAULT_PLACEMENT_MM):
+                         placement_mm: float = DEFAULT_PLACEMENT_MM, master: bool = False):
     """The file's calibration compensated at the reference placement (once per process)."""
     return _compensate(_calibration(path), renders, rig_name, theta_step_deg,
-                       placement_mm=placement_mm)
+                       placement_mm=placement_mm, master=master)
+
+
+def _uncompensated(path: str):
+    """The file's calibration without any compensation (§4.4 offsets, mastering)."""
+    return dataclasses.replace(_calibration(path), view_offsets_mm={}, view_radial_offsets_mm={},
+                               view_scales={}, master={})
 
 
 def _grid(theta_step_deg: float, placement_mm: float = DEFAULT_PLACEMENT_MM):
@@ -231,7 +252,7 @@ def _offset_mm(frame_dir: str) -> float:
 @functools.lru_cache(maxsize=16)
 def _nominal_radii(frame_dir: str, cal_path: str, renders: str, rig_name: str,
                    theta_step_deg: float, compensate: bool = True,
-                   placement_mm: float = DEFAULT_PLACEMENT_MM) -> dict:
+                   placement_mm: float = DEFAULT_PLACEMENT_MM, master: bool = False) -> dict:
     """Per-view radii of a placement without noise or speckle (the speckle run's reference)."""
     from types import SimpleNamespace
 
@@ -242,8 +263,8 @@ def _nominal_radii(frame_dir: str, cal_path: str, renders: str, rig_name: str,
     Y, L, _ = _placement(frame_dir)
     img, _, _ = sensor_image(load_rig(rig_name), SimpleNamespace(radiance_W_m2_sr=Y,
                                                                   laser_W_m2_sr=L), noise="none")
-    cal = (_nominal_calibration(cal_path, renders, rig_name, theta_step_deg, placement_mm)
-           if compensate else dataclasses.replace(_calibration(cal_path), view_offsets_mm={}))
+    cal = (_nominal_calibration(cal_path, renders, rig_name, theta_step_deg, placement_mm,
+                                master) if compensate else _uncompensated(cal_path))
     res = inverse_triangulate(img, cal, _grid(theta_step_deg, placement_mm),
                               compensate=compensate)
     return {n: v.r_mm for n, v in res.views.items()}
@@ -275,8 +296,9 @@ def mc_trial(trial: Trial) -> TrialOutput:
                                speckle_seed=int(seeds[1]))
     r0 = GAUGE_DIAMETER_MM / 2.0
     step = float(p["theta_step_deg"])
+    master = bool(p.get("master", False))
     if not p.get("compensate", True):  # measured without the §4.4 compensation
-        cal = dataclasses.replace(_calibration(p["calibration"]), view_offsets_mm={})
+        cal = _uncompensated(p["calibration"])
         if "calibration" in vary:
             cal = sample_calibration(cal, np.random.default_rng(seeds[2]))
     elif vary & {"calibration", "compensation"}:
@@ -287,9 +309,11 @@ def mc_trial(trial: Trial) -> TrialOutput:
             cal = sample_calibration(cal, np.random.default_rng(seeds[2]))
         cal = _compensate(cal, p["renders"], p["rig"], step,
                           noise_seed=int(seeds[4]) if "compensation" in vary else None,
-                          shots=int(p.get("compensation_shots", 1)), placement_mm=pl_mm)
+                          shots=int(p.get("compensation_shots", 1)), placement_mm=pl_mm,
+                          master=master)
     else:  # the same procedure, once
-        cal = _nominal_calibration(p["calibration"], p["renders"], p["rig"], step, pl_mm)
+        cal = _nominal_calibration(p["calibration"], p["renders"], p["rig"], step, pl_mm,
+                                   master)
     grid = _grid(step, pl_mm)
     out = inverse_triangulate(image, cal, grid, compensate=bool(cal.view_offsets_mm))
     offset = _offset_mm(str(Path(p["renders"]) / f"placement_{k:02d}"))
@@ -297,7 +321,7 @@ def mc_trial(trial: Trial) -> TrialOutput:
     if p["vary"] == "speckle":  # per-point scatter caused by speckle alone (vs. no speckle)
         nominal = _nominal_radii(str(Path(p["renders"]) / f"placement_{k:02d}"), p["calibration"],
                                  p["renders"], p["rig"], step, bool(p.get("compensate", True)),
-                                 pl_mm)
+                                 pl_mm, master)
         diffs = np.concatenate([out.views[n].r_mm - nominal[n] for n in out.views])
         extra["speckle_point_std_um"] = float(np.nanstd(diffs) * 1e3)
     pts = np.concatenate([v.points_meas_mm[v.valid, :2] for v in out.views.values()])
@@ -363,7 +387,7 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
                           placements: int = 8, seed: int = 0, rig: str = "paper", spp: int = 16,
                           theta_step_deg: float = 0.5, workers: int | None = None,
                           dask_address: str | None = None, compensate: bool = True,
-                          compensation_shots: int = 1,
+                          compensation_shots: int = 1, master: bool = False,
                           placement_mm: float = DEFAULT_PLACEMENT_MM, say=print) -> dict:
     """Run the study (see the module docstring); returns the summary written to summary.json.
 
@@ -376,7 +400,8 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
     offsets of ``calibration`` are ignored) and the ``compensation`` input is left out.
     ``compensation_shots``: images of the reference placement each compensation is fitted
     to (jointly, :func:`lts360.recon.calibration.compensation.joint_view_offsets`); the ``compensation``
-    input's spread falls as ``1/√shots``."""
+    input's spread falls as ``1/√shots``.  ``master``: every compensation is mastered with
+    the gauge's known diameter (needs ``compensate``)."""
     if not 1 <= int(compensation_shots) <= 100:
         raise ValueError(f"compensation_shots must be in [1, 100], got {compensation_shots}")
     out = Path(out_dir)
@@ -389,6 +414,8 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
             "placements": placements, "rig": rig, "theta_step_deg": theta_step_deg,
             "placement_mm": float(placement_mm),
             "compensate": bool(compensate), "compensation_shots": int(compensation_shots)}
+    if master and compensate:  # only then: the trials of earlier studies keep their parameters
+        base["master"] = True
     if workers is None and dask_address is None:
         workers = 2
     kw = dict(seed=seed, workers=workers, dask_address=dask_address, say=say)

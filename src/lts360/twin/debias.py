@@ -352,9 +352,11 @@ class TwinCorrector:
             # A compensated measurement moved the twin's view by its §4.4 offset (and its
             # mastering) too: the twin is rendered through the very planes it is measured
             # with, so what corrects those planes' errors in the real image is no bias of its.
-            exact = ray_radii(_compensated(verts, plan.cal, name,
-                                           getattr(twin, "compensated", False)),
-                              tv.theta_rad, near_mm=tv.r_mm)
+            exact = np.full(np.shape(tv.r_mm), np.nan)
+            exact[tv.valid] = ray_radii(_compensated(verts, plan.cal, name,
+                                                     getattr(twin, "compensated", False)),
+                                        np.asarray(tv.theta_rad)[tv.valid],
+                                        near_mm=np.asarray(tv.r_mm)[tv.valid])
             bias[name] = np.where(tv.valid, tv.r_mm - exact, np.nan)
         return surface, axial, twin, bias
 
@@ -411,7 +413,10 @@ class TwinCorrector:
             return result
         entry["profile"] = {"center_mm": profile.center_mm.tolist(),
                             "coverage": profile.coverage,
-                            "largest_gap_deg": profile.largest_gap_deg}
+                            "largest_gap_deg": profile.largest_gap_deg,
+                            # the points' noise, the smoothing it asked for, the outliers dropped
+                            "noise_um": profile.noise_um, "smooth_deg": profile.smooth_deg,
+                            "n_outliers": profile.n_outliers}
         surface, axial, twin, bias = self._bias(result, measure, plan, profile, k)
         entry["axial"] = axial
         zones, s_bias = {}, {}

@@ -25,6 +25,7 @@ This module imports no ground truth: it runs on real images and real calibration
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 from typing import Mapping
 
@@ -228,6 +229,10 @@ def plan_inverse(cal: Calibration, grid: CylGrid, *, views=None, windows=None,
 
 # -- stage 2: sampling -------------------------------------------------------------------------
 
+#: plan_pixels per plan (a twin renders a section's pixels for every section of a plan).
+_PLAN_PIXELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
 def plan_pixels(plan: InversePlan, *, margin_px: int = 4) -> np.ndarray:
     """(n, 2) int ``(x, y)``: every pixel the plan's cubic samples read (the 4 × 4
     neighbourhood of each grid point's projection), widened by ``margin_px``, inside the
@@ -237,6 +242,9 @@ def plan_pixels(plan: InversePlan, *, margin_px: int = 4) -> np.ndarray:
     (the margin keeps the pixels that speckle and defocus couple to the read ones)."""
     if margin_px < 0:
         raise ValueError(f"margin_px must be >= 0, got {margin_px}")
+    cached = _PLAN_PIXELS.get(plan, {}).get(int(margin_px))
+    if cached is not None:
+        return cached.copy()
     w, h = plan.cal.image_size
     mask = np.zeros((h, w), bool)
     for vp in plan.views.values():
@@ -249,11 +257,16 @@ def plan_pixels(plan: InversePlan, *, margin_px: int = 4) -> np.ndarray:
     # floor(u) - 1 ... floor(u) + 2, then the margin: a box of half-widths (1 + m, 2 + m)
     # about the marked pixel, made symmetric (one pixel more on the left and top).
     r = 2 + int(margin_px)
-    from scipy.ndimage import binary_dilation
+    from scipy.ndimage import maximum_filter1d
 
-    mask = binary_dilation(mask, structure=np.ones((2 * r + 1, 2 * r + 1), bool))
-    ys, xs = np.nonzero(mask)
-    return np.column_stack([xs, ys])
+    # the square box as two 1-D passes (the same pixels, a tenth of the time)
+    m = mask.view(np.uint8)
+    for axis in (0, 1):
+        m = maximum_filter1d(m, 2 * r + 1, axis=axis, mode="constant", cval=0)
+    ys, xs = np.nonzero(m)
+    out = np.column_stack([xs, ys])
+    _PLAN_PIXELS.setdefault(plan, {})[int(margin_px)] = out
+    return out.copy()
 
 
 def sample_profiles(image: np.ndarray, view_plan: ViewPlan) -> np.ndarray:
