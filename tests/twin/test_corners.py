@@ -153,7 +153,8 @@ def test_the_twin_with_corners_unrounds_a_rendered_hexagon(hex_frame):
 
 def test_a_rough_profile_keeps_its_corners():
     """Points 0.1° apart with 30 µm of radial noise correlated over 1° (a realistic 16-spp
-    frame's is rough like that), their profile as the twin makes it: the faces' fits leave up
+    frame's is rough like that), their profile as the twin's corner mode makes it (over 1°, every
+    point kept: the noise-driven wider smoothing would round the corners): the faces' fits leave up
     to ~21 µm rms, within twice the profile's own roughness, so all six corners are found; the
     apex is then uncertain by ~0.1 mm (the twin decides whether to keep it)."""
     from lts360.twin.profile import section_profile
@@ -163,7 +164,8 @@ def test_a_rough_profile_keeps_its_corners():
     th = np.radians(np.arange(3600) * 0.1)
     noise = uniform_filter1d(np.random.default_rng(0).standard_normal(th.size), 10, mode="wrap")
     r = ray_radii(prof.vertices_mm, th) + 0.03 * noise / noise.std()
-    rough = section_profile(np.column_stack([r * np.cos(th), r * np.sin(th)]), smooth_deg=1.0)
+    rough = section_profile(np.column_stack([r * np.cos(th), r * np.sin(th)]), smooth_deg=1.0,
+                            noise_target_um=None)
     _, corners = sharpen_corners(rough)
     assert len(corners) == 6
     assert max(max(c.fit_rms_mm) for c in corners) > 0.02  # the fixed limit alone: fewer

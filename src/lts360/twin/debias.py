@@ -280,9 +280,14 @@ class TwinCorrector:
 
     # -- the hook ----------------------------------------------------------------------------
     @staticmethod
-    def _profile(result):
+    def _profile(result, *, fine: bool = False):
+        """The section's profile from every view's valid points: smoothed as their noise asks
+        (:func:`section_profile`), or ``fine``: over 1° whatever their noise, every point kept
+        (the corners' faces are fitted on it: a noisy profile's wide smoothing rounds them)."""
         pts = [v.points_meas_mm[v.valid, :2] for v in result.views.values()]
         pts = np.concatenate(pts) if pts else np.zeros((0, 2))
+        if fine:
+            return section_profile(pts, smooth_deg=1.0, noise_target_um=None)
         return section_profile(pts, smooth_deg=1.0)
 
     def observe(self, result, *, z_mm: float, origin_mm=(0.0, 0.0)) -> None:
@@ -421,7 +426,8 @@ class TwinCorrector:
         entry["axial"] = axial
         zones, s_bias = {}, {}
         if self.corners:
-            sharp, found = sharpen_corners(profile)
+            fine = self._profile(result, fine=True) if profile.smooth_deg > 1.0 else profile
+            sharp, found = sharpen_corners(fine)
             if found:
                 s_surface, _, s_twin, s_bias = self._bias(result, measure, plan, sharp, k)
                 zones = self._choose_corners(result, profile, found, twin, s_twin, entry)
