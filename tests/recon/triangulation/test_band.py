@@ -70,28 +70,6 @@ def test_follow_profile_recovers_an_off_axis_circle_despite_wrong_picks():
     assert follow_profile(th, np.full((3, th.size), np.nan), periodic=True) is None
 
 
-def test_follow_profile_a_pair_of_wrong_picks_on_a_dim_stretch_does_not_win():
-    # A specular pipe's dim stretch, as the aluminium pipe's first section with
-    # interreflections gave it: one view, a candidate every few degrees, and two adjacent picks
-    # of interreflected light 5 mm inside the pipe next to one true candidate.  A ±3° median
-    # of those three took the wrong pair and the band missed the line over 25°.
-    th = np.radians(np.arange(-180.0, 180.0, 1.0))
-    cand = np.full((3, th.size), np.nan)
-    cand[0, :] = 11.0
-    deg = np.round(np.degrees(th)).astype(int)
-    dim = (deg >= 50) & (deg <= 95)
-    cand[0, dim] = np.nan
-    for d in (53, 58, 62, 64, 69, 86, 91):
-        cand[0, deg == d] = 11.0
-    cand[0, deg == 70] = 5.98
-    cand[0, deg == 71] = 5.94
-    p = follow_profile(th, cand, periodic=True)
-    assert p is not None and np.max(np.abs(p.r_mm - 11.0)) < 1e-9
-    # without the pair the answer is the same: the dense stretches are untouched
-    cand[0, (deg == 70) | (deg == 71)] = np.nan
-    assert np.max(np.abs(follow_profile(th, cand, periodic=True).r_mm - 11.0)) < 1e-9
-
-
 def test_a_pit_of_picks_its_view_cannot_see_is_dropped(search):
     # The aluminium pipe's short scan with interreflections: four adjacent picks of the left
     # view 5.7 mm from the axis (light scattered inside the Ø22 mm pipe's stripe), with the

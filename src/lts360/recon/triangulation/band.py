@@ -10,13 +10,15 @@ stripe on its radial line; :func:`follow_profile` turns those candidates into on
 
 1. per θ, the median of the views' candidates (all views see the same section);
 2. a running median along θ (±3 coarse steps), robust to a view's isolated wrong pick (a
-   reflection, a stripe of another view that its radial line crosses); where that window
-   holds fewer than seven candidates (a dim stretch seen by one view), the median of the
-   seven nearest along θ, so that a pair of wrong picks (interreflected light) cannot
-   outvote the one true candidate between them;
+   reflection, a stripe of another view that its radial line crosses);
 3. candidates farther than ``outlier_mm`` from it are dropped and steps 1–2 repeated;
 4. θ with no candidate are filled by linear interpolation along θ (periodic on a full turn),
-   and a ±1-step moving average smooths the median's staircase.
+   and a ±1-step moving average smooths the median's staircase;
+5. (:meth:`BandSearch.profile`) candidates deeper than the fine band's half-width inside the
+   profile's least-squares circle that the profile hides from their own view are dropped and
+   steps 1–4 repeated: a run of picks of light scattered inside a shiny pipe
+   (interreflections) can outvote the pipe's few candidates where its line is dim, but its
+   view cannot see the bottom of the pit it makes.
 
 The fine grid is then ``r₀(θ) ± half_width`` per θ (:meth:`CylGrid.following`) and each
 view's θ window is derived with the profile's own surface normal (``θ − atan(r₀′/r₀)``), so a
@@ -74,16 +76,6 @@ DEFAULT_FIXED_HALF_WIDTH_MM = 2.0
 DEFAULT_OUTLIER_MM = 0.5
 #: Running median half-length along θ, in coarse steps.
 _MEDIAN_HALF = 3
-#: Fewest candidates a running median of :func:`follow_profile` decides from: where its
-#: ±``_MEDIAN_HALF`` window holds fewer, it takes the nearest ones along θ beyond.  A median
-#: of fewer values is outvoted by a pair of wrong picks: on a specular pipe's dim stretch
-#: (one view, a candidate every few degrees) two adjacent picks of interreflected light 5 mm
-#: inside the pipe outvoted the one true candidate between them, and the band then missed
-#: the right view's line over 25° of every section of the scan (measured: aluminium pipe,
-#: ``max_scatter`` 1, the first section's band; STUDIES.md, Interreflections).  Seven
-#: outvote a run of three wrong picks; a ±3-step window where two views see the section
-#: holds about 14.
-_MIN_SUPPORT = 7
 #: The coarse pass stops this fraction short of the nearest mirror plane.
 _MIRROR_CLEARANCE = 0.95
 #: Candidates of the coarse pass: the strongest run, even where another run is comparable.
@@ -179,35 +171,6 @@ def _running_nanmedian(values: np.ndarray, half: int, periodic: bool) -> np.ndar
             return np.nanmedian(stack, axis=1)
 
 
-def _supported_median(values: np.ndarray, theta_rad: np.ndarray, half: int, periodic: bool,
-                      min_support: int = _MIN_SUPPORT) -> np.ndarray:
-    """:func:`_running_nanmedian` over ±``half`` steps, but where that window holds fewer than
-    ``min_support`` finite values, the median of the ``min_support`` values nearest along θ
-    (all of them if there are fewer)."""
-    med = _running_nanmedian(values, half, periodic)
-    v = np.atleast_2d(values)
-    n = v.shape[-1]
-    ok = np.isfinite(v)
-    per = ok.sum(axis=0)
-    k = np.arange(n)[:, None] + np.arange(-half, half + 1)[None, :]
-    count = per[k % n].sum(axis=1) if periodic else \
-        np.where((k >= 0) & (k < n), per[np.clip(k, 0, n - 1)], 0).sum(axis=1)
-    sparse = np.flatnonzero(count < min_support)
-    if sparse.size == 0 or not ok.any():
-        return med
-    _, col = np.nonzero(ok)
-    vals = v[ok]
-    th = np.asarray(theta_rad, float)
-    d = np.abs(th[sparse][:, None] - th[col][None, :])
-    if periodic:
-        d = np.minimum(d, 2 * np.pi - d)
-    m = min(min_support, vals.size)
-    near = np.argpartition(d, m - 1, axis=1)[:, :m]
-    med = med.copy()
-    med[sparse] = np.median(vals[near], axis=1)
-    return med
-
-
 def follow_profile(theta_rad, candidates_mm, *, periodic: bool,
                    outlier_mm: float = DEFAULT_OUTLIER_MM, min_points: int = 3) -> Profile | None:
     """One profile ``r₀(θ)`` from every view's per-θ candidates (see the module docstring).
@@ -236,13 +199,13 @@ def follow_profile(theta_rad, candidates_mm, *, periodic: bool,
         raise ValueError(f"outlier_mm must be > 0, got {outlier_mm}")
     cand = np.where(np.isfinite(cand), cand, np.nan)
     for _ in range(2):
-        smooth = _supported_median(cand, th, _MEDIAN_HALF, periodic)
+        smooth = _running_nanmedian(cand, _MEDIAN_HALF, periodic)
         keep = np.abs(cand - smooth[None, :]) <= outlier_mm
         cand = np.where(keep, cand, np.nan)
     measured = np.isfinite(cand).any(axis=0)
     if measured.sum() < min_points:
         return None
-    smooth = _supported_median(cand, th, _MEDIAN_HALF, periodic)
+    smooth = _running_nanmedian(cand, _MEDIAN_HALF, periodic)
     ok = np.isfinite(smooth)
     if periodic:
         r = np.interp(th, th[ok], smooth[ok], period=2 * np.pi)
@@ -405,9 +368,12 @@ class BandSearch:
         least-squares circle *and* that the profile itself hides from their view
         (:func:`self_occluded`) are dropped and the profile followed again: a view cannot see
         the bottom of a pit narrower than its own depth, so such a run of picks is light
-        scattered there, not the section (measured: interreflected light 5 mm inside the
-        aluminium pipe, four picks of one view in a row, made a 4.5 mm pit in the profile;
-        STUDIES.md, Interreflections)."""
+        scattered there, not the section (measured on the aluminium pipe with
+        interreflections, ``max_scatter`` 1: picks of one view 5 mm inside the pipe where its
+        own line is dim made 4.5–5 mm pits in the profile, and the band then missed the line
+        there in every section that reused it; STUDIES.md, Interreflections).  A convex
+        section's candidates are never hidden, a cable's valley is shallower than the band's
+        half-width."""
         cand, _ = self.candidates(image)
         th = self.grid.theta_rad
         prof = follow_profile(th, cand, periodic=self.grid.is_full_turn)
