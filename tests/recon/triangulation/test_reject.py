@@ -297,21 +297,46 @@ def _flank(results):
 def test_a_section_on_a_shoulder_is_a_flank_and_its_neighbours_are_not():
     """A 45° shoulder between Ø22 and Ø24 mm, sections 0.5 mm apart: the section on it differs
     from both neighbours by slope 1 and is FLANK whole; the sections beside it differ from one
-    neighbour only; the scan's end sections have one neighbour and are never judged."""
+    neighbour only; the scan's end sections, with one neighbour, lie before the turn here (slope
+    0 to it) and are kept."""
     from lts360.recon.triangulation.reject import flank_slopes, reject_scan
 
     th = np.radians(np.arange(-180.0, 180.0, 0.2))
     res = [_scan_section(th, r) for r in (11.0, 11.0, 11.5, 12.0, 12.0)]
     zs = [0.0, 0.5, 1.0, 1.5, 2.0]
     fl = flank_slopes(res, zs)
-    assert np.isnan(fl[0]).all() and np.isnan(fl[-1]).all()
+    assert np.allclose(fl[0], 0.0) and np.allclose(fl[-1], 0.0)
     assert np.allclose(fl[2], 1.0) and np.allclose(fl[1], 0.0) and np.allclose(fl[3], 0.0)
     assert _flank(reject_scan(res, zs)) == [0, 0, th.size, 0, 0]
+    # without the end-section rule the ends are never judged
+    fl = flank_slopes(res, zs, end_sections=False)
+    assert np.isnan(fl[0]).all() and np.isnan(fl[-1]).all()
     # a gentle taper (slope 0.1, a 6° cone) is measured, not flagged
     taper = [_scan_section(th, 11.0 + 0.05 * k) for k in range(5)]
     assert _flank(reject_scan(taper, zs)) == [0] * 5
     # the criterion off
     assert _flank(reject_scan(res, zs, max_flank_slope=None)) == [0] * 5
+
+
+def test_a_scan_that_ends_on_a_flank_flags_its_end_sections():
+    """A short scan of a groove whose end sections lie on its 45° flanks (the undercut
+    shaft's 5-section scan): each end differs from its only neighbour by slope 1 where that
+    neighbour's slope beyond is 0, so the surface turned within the last two pitches; with
+    no section beyond, the end is on the flank or past it and its points are flagged.  The
+    rule off, they are kept."""
+    from lts360.recon.triangulation.reject import reject_scan
+
+    th = np.radians(np.arange(-180.0, 180.0, 0.2))
+    zs = [0.5 * k for k in range(5)]
+    res = [_scan_section(th, r) for r in (11.5, 11.0, 11.0, 11.0, 11.5)]
+    assert _flank(reject_scan(res, zs)) == [th.size, 0, 0, 0, th.size]
+    from lts360.recon.triangulation.reject_tolerances import TOLERANCES
+
+    assert TOLERANCES.flank_end_sections
+    from lts360.recon.triangulation.reject import flank_slopes
+
+    fl = flank_slopes(res, zs, end_sections=False)
+    assert np.isnan(fl[0]).all() and np.isnan(fl[-1]).all()
 
 
 def test_a_cone_keeps_its_slope_and_is_not_a_flank():

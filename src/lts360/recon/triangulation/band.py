@@ -13,7 +13,12 @@ stripe on its radial line; :func:`follow_profile` turns those candidates into on
    reflection, a stripe of another view that its radial line crosses);
 3. candidates farther than ``outlier_mm`` from it are dropped and steps 1–2 repeated;
 4. θ with no candidate are filled by linear interpolation along θ (periodic on a full turn),
-   and a ±1-step moving average smooths the median's staircase.
+   and a ±1-step moving average smooths the median's staircase;
+5. (:meth:`BandSearch.profile`) candidates deeper than the fine band's half-width inside the
+   profile's least-squares circle that the profile hides from their own view are dropped and
+   steps 1–4 repeated: a run of picks of light scattered inside a shiny pipe
+   (interreflections) can outvote the pipe's few candidates where its line is dim, but its
+   view cannot see the bottom of the pit it makes.
 
 The fine grid is then ``r₀(θ) ± half_width`` per θ (:meth:`CylGrid.following`) and each
 view's θ window is derived with the profile's own surface normal (``θ − atan(r₀′/r₀)``), so a
@@ -357,9 +362,59 @@ class BandSearch:
         return np.array(rows), res
 
     def profile(self, image) -> Profile | None:
-        """The first-pass profile of the section in ``image`` (``None``: no stripe found)."""
+        """The first-pass profile of the section in ``image`` (``None``: no stripe found).
+
+        Candidates that lie deeper than ``DEFAULT_FOLLOW_HALF_WIDTH_MM`` inside the profile's
+        least-squares circle *and* that the profile itself hides from their view
+        (:func:`self_occluded`) are dropped and the profile followed again: a view cannot see
+        the bottom of a pit narrower than its own depth, so such a run of picks is light
+        scattered there, not the section (measured on the aluminium pipe with
+        interreflections, ``max_scatter`` 1: picks of one view 5 mm inside the pipe where its
+        own line is dim made 4.5–5 mm pits in the profile, and the band then missed the line
+        there in every section that reused it; STUDIES.md, Interreflections).  A convex
+        section's candidates are never hidden, a cable's valley is shallower than the band's
+        half-width."""
         cand, _ = self.candidates(image)
-        return follow_profile(self.grid.theta_rad, cand, periodic=self.grid.is_full_turn)
+        th = self.grid.theta_rad
+        prof = follow_profile(th, cand, periodic=self.grid.is_full_turn)
+        if prof is None:
+            return None
+        drop = self._hidden_pits(prof, cand)
+        if not drop.any():
+            return prof
+        again = follow_profile(th, np.where(drop, np.nan, cand), periodic=self.grid.is_full_turn)
+        return prof if again is None else again
+
+    def _hidden_pits(self, prof: Profile, cand: np.ndarray) -> np.ndarray:
+        """(views, nθ) bool: candidates deeper than the fine band's half-width inside the
+        profile's least-squares circle that the profile hides from their view."""
+        from lts360.geometry.fit import fit_circle
+
+        th = prof.theta_rad
+        drop = np.zeros(cand.shape, bool)
+        m = np.asarray(prof.measured, bool)
+        if m.sum() < 10:
+            return drop
+        try:
+            fit = fit_circle(np.column_stack([prof.r_mm[m] * np.cos(th[m]),
+                                              prof.r_mm[m] * np.sin(th[m])]))
+        except ValueError:
+            return drop
+        with np.errstate(invalid="ignore"):
+            depth = fit.radius_mm - np.hypot(cand * np.cos(th) - fit.center_mm[0],
+                                             cand * np.sin(th) - fit.center_mm[1])
+        deep = np.isfinite(cand) & (depth > DEFAULT_FOLLOW_HALF_WIDTH_MM)
+        if not deep.any():
+            return drop
+        r0 = prof.at(th)
+        pts = np.column_stack([r0 * np.cos(th), r0 * np.sin(th)])
+        T = self.cal.T_meas_cam
+        for row, view in enumerate(get_views(self.cal, self.views)):
+            idx = np.flatnonzero(deep[row])
+            if idx.size:
+                c = T[:3, :3] @ view.virtual_camera_cam_mm + T[:3, 3]
+                drop[row, idx] = self_occluded(prof, th[idx], c[None, :2] - pts[idx])
+        return drop
 
     def fine_grid(self, profile: Profile, *, theta_step_deg: float, r_step_mm: float,
                   half_width_mm: float = DEFAULT_FOLLOW_HALF_WIDTH_MM,

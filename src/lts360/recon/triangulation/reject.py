@@ -55,9 +55,13 @@ from the measurement alone:
     not hold, and the stripe's centre is not the surface in the plane (measured: the undercut
     shaft's section on its groove's 45° flank reads −39 µm over its whole turn, 781 of its 806
     spurious points).  A section beside a flank differs from one neighbour only and is kept;
-    so are a scan's end sections, and a cone, whose slope does not change from section to
-    section (only a flank short enough for the sheet to span its turn is flagged:
-    :func:`flank_slopes`).  The neighbours' profiles are first turned back by the
+    so is a cone, whose slope does not change from section to section (only a flank short
+    enough for the sheet to span its turn is flagged: :func:`flank_slopes`).  A scan's end
+    section has one neighbour: it is flagged where it differs from it by that slope and the
+    surface turns between them (the neighbour's slope beyond differs by as much), for it lies
+    on the flank or past it and no section beyond tells which (measured: the undercut
+    shaft's 5-section scan, whose end sections lie on its groove's flanks;
+    :attr:`RejectionTolerances.flank_end_sections`).  The neighbours' profiles are first turned back by the
     scan's screw rate (:func:`screw_rate`), so that a cable's strands or a helical groove,
     which turn between sections, are compared along the helix, where they do not change.
 ``NEIGHBOURS``
@@ -607,7 +611,8 @@ def axial_slopes(results, z_mm, *, frames=None, _profiles=None) -> list:
 
 
 def flank_slopes(results, z_mm, *, frames=None, _profiles=None, _screw=None,
-                 min_change: float = TOLERANCES.max_flank_slope) -> list:
+                 min_change: float = TOLERANCES.max_flank_slope,
+                 end_sections: bool = TOLERANCES.flank_end_sections) -> list:
     """Per section, ``|dr/dz|`` per θ to *both* neighbours (the smaller of the two sides; NaN
     where a side is unknown, so never at a scan's ends) where the section lies on a *short*
     flank (:data:`Quality.FLANK`), 0 elsewhere.
@@ -617,7 +622,12 @@ def flank_slopes(results, z_mm, *, frames=None, _profiles=None, _screw=None,
     surface turns along the axis within two pitches, as at a groove's or a shoulder's side,
     and the sheet there may span the turn.  A cone keeps its slope from section to section
     and is measured (the sheet's centre on a straight slope is the surface's); where neither
-    side's next section is known the flank counts as short.  Arguments as
+    side's next section is known the flank counts as short.
+
+    ``end_sections``: a scan's end section (one neighbour) gets its slope to that neighbour
+    where the surface turns between them (the neighbour's slope beyond differs by more than
+    ``min_change``): it lies on the flank or past it, and with no section beyond the scan
+    cannot tell which (:attr:`RejectionTolerances.flank_end_sections`).  Arguments as
     :func:`axial_slopes`."""
     zs = [float(z) for z in z_mm]
     keys = list(frames) if frames is not None else [None] * len(results)
@@ -631,13 +641,19 @@ def flank_slopes(results, z_mm, *, frames=None, _profiles=None, _screw=None,
         for j, jj in ((k - 1, k - 2), (k + 1, k + 2)):
             pj = _aligned(profs, results, zs, keys, k, j, screw)
             if pj is None:
-                break
+                continue
             s_in = (profs[k] - pj) / (zs[k] - zs[j])
             inner.append(np.abs(s_in))
             pjj = _aligned(profs, results, zs, keys, k, jj, screw) \
                 if _comparable(results, zs, keys, profs, j, jj) else None
             if pjj is not None:
                 changes.append(np.abs(s_in - (pj - pjj) / (zs[j] - zs[jj])))
+        if len(inner) == 1 and len(changes) == 1 and end_sections:
+            # a scan's end section: its only neighbour's slope beyond it is known, and the
+            # surface turns between them (a flank within the last two pitches): the end
+            # section lies on the flank or past it, and no section beyond tells which
+            out.append(np.where(changes[0] > min_change, inner[0], 0.0))
+            continue
         if len(inner) < 2:
             out.append(np.full(n, np.nan))
             continue
