@@ -4,7 +4,7 @@ Paper rig, plug gauge, 1280×1024, ``llvm_ad_mono`` by default.  Rows (wall cloc
 the warm calls; the first call, which compiles, apart):
 
 * ``frame_realistic_16``: :func:`simulate_frame` at 16 spp with realistic noise and speckle,
-  the default (the pixel support, when the code has one);
+  the code's default support (``full`` here; the pixel support where that is the default);
 * ``frame_realistic_16_full``: the same with ``support="full"`` (every pixel);
 * ``frame_noise_free_256``: :func:`simulate_frame` at 256 spp without noise, the default;
 * ``frame_realistic_16_reused``: the first row on a scene built once (``SceneCache``: the
