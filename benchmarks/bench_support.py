@@ -4,12 +4,16 @@ Paper rig, plug gauge, 1280×1024, ``llvm_ad_mono`` by default.  Rows (wall cloc
 the warm calls; the first call, which compiles, apart):
 
 * ``frame_realistic_16``: :func:`simulate_frame` at 16 spp with realistic noise and speckle,
-  the default (the pixel support, when the code has one);
+  the code's default support (``full`` here; the pixel support where that is the default);
 * ``frame_realistic_16_full``: the same with ``support="full"`` (every pixel);
 * ``frame_noise_free_256``: :func:`simulate_frame` at 256 spp without noise, the default;
 * ``frame_realistic_16_reused``: the first row on a scene built once (``SceneCache``: the
   scene and the support are looked up, as a study's repeated frames do);
-* ``render_full_16``: :func:`render_radiance`, the full frame alone.
+* ``render_full_16``: :func:`render_radiance`, the full frame alone;
+* ``speckle_keyed``: the frame's speckle, :func:`speckle_on_tiles` on the laser pixels of a
+  16-spp frame (the code's way since the speckle is keyed to the pixel);
+* ``speckle_bbox``: one :func:`speckle_pattern` on the same pixels' bounding box plus 16 px,
+  the full frame's way before.
 
 Run it with ``PYTHONPATH`` at another checkout's ``src`` to measure that code ("before"):
 rows its ``simulate_frame`` cannot make (no ``support`` argument) are left out.
@@ -30,7 +34,7 @@ import time
 from pathlib import Path
 
 ROWS = ("frame_realistic_16", "frame_realistic_16_full", "frame_noise_free_256",
-        "frame_realistic_16_reused", "render_full_16")
+        "frame_realistic_16_reused", "render_full_16", "speckle_keyed", "speckle_bbox")
 
 
 def main(argv=None) -> None:
@@ -71,6 +75,8 @@ def main(argv=None) -> None:
             rig, obj, spp=16, seed=1, noise="realistic", support="full")
         fns["frame_realistic_16_reused"] = lambda: simulate_frame(
             rig, obj, spp=16, seed=1, noise="realistic", scenes=cache)
+    if {"speckle_keyed", "speckle_bbox"} & set(args.rows.split(",")):
+        _speckle_rows(fns, rig, obj, simulate_frame)
     out = {"code": str(src), "commit": commit, "variant": args.variant,
            "machine": f"{platform.node()} {os.cpu_count()} cores",
            "load_average": os.getloadavg(), "rows": {}}
@@ -93,6 +99,24 @@ def main(argv=None) -> None:
     print(text)
     if args.json:
         Path(args.json).write_text(text)
+
+
+def _speckle_rows(fns: dict, rig, obj, simulate_frame) -> None:
+    """The speckle stage alone, on the laser pixels of one noise-free 16-spp frame."""
+    import numpy as np
+
+    from lts360.simulator import speckle as sp
+
+    lit = simulate_frame(rig, obj, spp=16, seed=1, noise="none").render.laser_W_m2_sr > 0
+    cam = rig.camera
+    kw = dict(pixel_pitch_um=cam.pixel_pitch_um, wavelength_nm=rig.laser.wavelength_nm,
+              f_number=cam.f_number,
+              magnification=cam.focal_length_mm / (cam.focus_distance_mm - cam.focal_length_mm))
+    rows, cols = np.flatnonzero(lit.any(axis=1)), np.flatnonzero(lit.any(axis=0))
+    shape = (rows[-1] - rows[0] + 33, cols[-1] - cols[0] + 33)
+    if hasattr(sp, "keyed_contrast"):  # the keyed speckle exists in this code
+        fns["speckle_keyed"] = lambda: sp.speckle_on_tiles(lit, rng=1, **kw)
+    fns["speckle_bbox"] = lambda: sp.speckle_pattern(shape, rng=1, **kw)
 
 
 if __name__ == "__main__":

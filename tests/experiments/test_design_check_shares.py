@@ -109,9 +109,14 @@ def test_covariance_follows_a_flipped_normal():
 
 
 # (mean, σ) of the radius errors measured 2026-12-04 by the run below (µm; half-size images at
-# 4 spp, so the means hold the line-centre bias at that sampling, not the model's figures)
-MEASURED = {"noise": (-8.51, 1.15), "compensation": (-18.36, 6.09),
-            "compensation_paired_uncompensated": (-7.23, 1.11), "calibration": (-19.11, 5.77)}
+# 4 spp, so the means hold the line-centre bias at that sampling, not the model's figures).
+# One realisation: the render of seed 5 (full frames) and four draws of the keyed speckle and
+# the sensor noise. Another render realisation moves the noise-free error by σ 2.2 µm at this
+# sampling (render seeds 5-24: full frames -5.86, support frames -6.41 µm, paired difference
+# -0.55 ± 0.65 µm), and the draws' mean by ~1 µm, so a change of the chain (renderer,
+# support, speckle) moves these means beyond the bounds below and they are measured again.
+MEASURED = {"noise": (-6.32, 1.18), "compensation": (-14.24, 3.43),
+            "compensation_paired_uncompensated": (-6.89, 1.61), "calibration": (-19.11, 5.77)}
 
 
 @pytest.fixture(scope="module")
@@ -162,8 +167,10 @@ def test_compensation_does_not_lower_the_scatter(shares_run):
     sim = r["simulated"]
     s_u = sim["compensation_paired_uncompensated"]["sigma_um"]
     s_d = r["shares"]["compensation_paired"]["sigma_um"]
-    assert s_d > 2.0 * s_u, (s_d, s_u)  # measured: 5.67 against 1.11 µm
-    assert sim["compensation"]["sigma_um"] > s_u  # measured: 6.09 against 1.11 µm
+    # Four draws resolve the model's ratio (3.2) loosely: s_d / s_u measured 2.26, 1.89, 8.56
+    # at seeds 5, 6, 7 (full frames) and 1.55, 1.18, 16.1 (support frames).
+    assert s_d > 2.0 * s_u, (s_d, s_u)  # measured: 3.65 against 1.61 µm
+    assert sim["compensation"]["sigma_um"] > s_u  # measured: 3.43 against 1.61 µm
 
 
 @pytest.mark.parametrize("argv, message", [

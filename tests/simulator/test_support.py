@@ -114,6 +114,30 @@ def test_support_frame_has_the_full_frames_statistics(variant, rig, noise):
         assert ib.std() / ib.mean() == pytest.approx(if_.std() / if_.mean(), rel=0.15)
 
 
+def test_support_and_full_frames_get_the_same_speckle(variant, rig):
+    """Speckle is a function of the pixel's position and the seed: the camera image of a
+    radiance lit only on some of a support frame's laser pixels (those of the frame's right
+    half) equals, on those pixels, the image of the full frame's radiance, bit for bit (the
+    same radiance there, the same speckle, whatever else is lit)."""
+    import dataclasses
+
+    from lts360.simulator.frame import render_frame, sensor_image
+
+    spec = _spec(rig, build_object("plug-gauge:x=0.4"))
+    band, _ = render_frame(spec, spp=4, seed=2, scale=0.5, support="geometric")
+    full, _ = render_frame(spec, spp=4, seed=2, scale=0.5, support="full")
+    lit = (band.laser_W_m2_sr > 0) & (full.laser_W_m2_sr > 0)
+    lit[:, :lit.shape[1] // 2] = False
+    assert lit.sum() > 200 and (full.laser_W_m2_sr > 0).sum() > lit.sum()
+    part = dataclasses.replace(full, radiance_W_m2_sr=np.where(lit, full.radiance_W_m2_sr, 0),
+                               laser_W_m2_sr=np.where(lit, full.laser_W_m2_sr, 0))
+    kw = dict(noise="none", speckle=True, seed=5, scale=0.5, exposure_time_s=2.75e-4)
+    a, b = sensor_image(rig, full, **kw)[0], sensor_image(rig, part, **kw)[0]
+    assert np.array_equal(a[lit], b[lit])
+    plain = sensor_image(rig, full, **dict(kw, speckle=False))[0]
+    assert np.mean(a[lit] != plain[lit]) > 0.5     # the speckle is there
+
+
 def test_window_and_support_intersect(variant, rig):
     """A window (a study's band) with the default support renders only their intersection;
     with ``support="full"`` the whole window, as before."""

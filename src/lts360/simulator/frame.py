@@ -97,9 +97,11 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
         direct laser light, from the scene's
         geometry (the sheet's slab on every shape, seen through every view, widened by the
         defocus blur); ``pilot``: the pixels a low-spp full render of the same integrator
-        lights (for light the geometry does not bound, e.g. interreflections).  The support is not
-        yet the default: frames rendered on it measure slightly differently from full frames
-        (docs/simulator.md, "an open observation").  Outside the
+        lights (for light the geometry does not bound, e.g. interreflections).  A support
+        frame is another realisation of the full frame's render noise, with its statistics and
+        the same speckle; it is not yet the default because tests pinned on one full-frame
+        realisation (a study's claims) are not yet measured again on it (docs/simulator.md).
+        Outside the
         support a pixel holds no laser light: with ambient light off it gets none, with it on
         the ambient radiance of one full-frame ambient-only render at :data:`AMBIENT_SPP`.
         ``truth["render"]["support"]`` records the method and the pixel count.
@@ -121,8 +123,7 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
                             support=support, scenes=scenes, max_scatter=max_scatter)
     image, exposure_time_s, magnification = sensor_image(
         rig, res, noise=noise, seed=seed, speckle_seed=speckle_seed, scale=scale,
-        exposure_time_s=exposure_time_s, exposure_fraction=exposure_fraction,
-        speckle_tiles=sup.method in ("geometric", "pilot"))
+        exposure_time_s=exposure_time_s, exposure_fraction=exposure_fraction)
     sens = rig.sensor
     radiance = res.radiance_W_m2_sr
     truth = rig_truth(rig, res.K, (radiance.shape[1], radiance.shape[0]))
@@ -235,8 +236,7 @@ def render_frame(spec: SceneSpec, *, spp: int, seed: int, scale: float = 1.0, ma
 def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int = 0,
                  speckle_seed: int | None = None, scale: float = 1.0,
                  exposure_time_s: float | None = None, exposure_fraction: float = 0.8,
-                 speckle: bool | None = None, speckle_tiles: bool = False
-                 ) -> tuple[np.ndarray, float, float]:
+                 speckle: bool | None = None) -> tuple[np.ndarray, float, float]:
     """The camera's digital image of a rendered radiance image (speckle + EMVA 1288 sensor).
 
     Parameters
@@ -253,10 +253,6 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
     speckle : bool, optional
         Speckle on the laser light; default: with ``noise="realistic"`` only.  ``noise="none",
         speckle=True`` gives speckle without sensor noise (for sensitivity studies).
-    speckle_tiles : bool
-        Draw the speckle on the 32 × 32 tiles that hold laser light only
-        (:func:`lts360.simulator.speckle.speckle_on_tiles`, a pixel-support frame's); default
-        one pattern on the laser-lit bounding box.
     exposure_time_s : float, optional
         Fixed exposure; by default the brightest laser-lit pixels (99.9th percentile; all
         pixels when nothing is laser-lit) land at ``exposure_fraction`` of full scale.
@@ -269,7 +265,7 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
         Lateral magnification at the focus distance (the working f-number is N (1 + m)).
     """
     from lts360.simulator import sensor as sensor_mod
-    from lts360.simulator.speckle import speckle_on_tiles, speckle_pattern
+    from lts360.simulator.speckle import speckle_on_tiles
 
     if noise not in NOISE_MODES:
         raise ValueError(f"noise must be one of {', '.join(NOISE_MODES)}, got {noise!r}")
@@ -284,25 +280,14 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
     laser = res.laser_W_m2_sr
     if speckle is None:
         speckle = noise == "realistic"
-    lit_rows = np.flatnonzero(laser.any(axis=1))
-    if speckle and lit_rows.size and speckle_tiles:
-        # Speckle is stationary: draw it only on the image tiles that hold laser light.
+    if speckle and laser.any():
+        # Position-keyed speckle on the tiles that hold laser light: a pixel's speckle is the
+        # same whichever other pixels were rendered (a support frame's equals a full frame's).
         pattern = speckle_on_tiles(laser > 0, pixel_pitch_um=pitch_um,
                                    wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
                                    magnification=magnification,
                                    rng=np.random.default_rng(seeds[0]))
         radiance += laser * (pattern - 1.0)
-    elif speckle and lit_rows.size:
-        # One pattern on the laser-lit bounding box (plus a margin so the field's FFT
-        # filtering sees no edge), a fraction of the frame.
-        lit_cols = np.flatnonzero(laser.any(axis=0))
-        pad = 16
-        r0, r1 = max(0, lit_rows[0] - pad), min(laser.shape[0], lit_rows[-1] + pad + 1)
-        c0, c1 = max(0, lit_cols[0] - pad), min(laser.shape[1], lit_cols[-1] + pad + 1)
-        pattern = speckle_pattern((r1 - r0, c1 - c0), pixel_pitch_um=pitch_um,
-                                  wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
-                                  magnification=magnification, rng=np.random.default_rng(seeds[0]))
-        radiance[r0:r1, c0:c1] += laser[r0:r1, c0:c1] * (pattern - 1.0)
     if exposure_time_s is None:
         lit = laser > 0
         # The statistic over the laser-lit pixels only (the same values as a mask over the
