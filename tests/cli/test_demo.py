@@ -44,8 +44,11 @@ def test_the_full_demo_calibrates_and_runs_the_plug_gauge_study(tmp_path):
     table = json.loads((out / "plug-gauge" / "table.json").read_text())
     assert table["n_measurements"] == 3 and table["mean_coverage_deg"] > 350.0
     # Measured as a user would (§4.4, master, twin): the size within a few µm (10 placements:
-    # −2.4 µm, STUDIES.md); the paper's method (§4.4 alone) on the same images reads −15 µm.
+    # +1.8 µm, STUDIES.md). What §4.4 alone reads depends on the calibration's realisation
+    # (−15.4 and −3.0 µm for two speckle generators' boards): the master removes it, so only
+    # ours is bounded; every step is measured on the same images.
     assert table["ours"] == "c44_master_twin"
     assert abs(table["mean_radius_error_mm"]) < 0.006
-    assert abs(table["steps"]["c44"]["mean_radius_error_mm"]) > 0.008
+    assert {"c44", "c44_master", "c44_twin", "c44_master_twin"} <= set(table["steps"])
+    assert all(abs(s["mean_radius_error_mm"]) < 0.05 for s in table["steps"].values())
     assert "§4.4 + master + twin" in proc.stdout and "maximum error |mean| + U" in proc.stdout
