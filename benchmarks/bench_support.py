@@ -6,7 +6,9 @@ the warm calls; the first call, which compiles, apart):
 * ``frame_realistic_16``: :func:`simulate_frame` at 16 spp with realistic noise and speckle,
   the code's default support (``full`` here; the pixel support where that is the default);
 * ``frame_realistic_16_full``: the same with ``support="full"`` (every pixel);
+* ``frame_realistic_16_support``: the same with ``support="geometric"`` (the pixel support);
 * ``frame_noise_free_256``: :func:`simulate_frame` at 256 spp without noise, the default;
+* ``frame_noise_free_256_support``: the same on the pixel support;
 * ``frame_realistic_16_reused``: the first row on a scene built once (``SceneCache``: the
   scene and the support are looked up, as a study's repeated frames do);
 * ``render_full_16``: :func:`render_radiance`, the full frame alone;
@@ -33,8 +35,8 @@ import subprocess
 import time
 from pathlib import Path
 
-ROWS = ("frame_realistic_16", "frame_realistic_16_full", "frame_noise_free_256",
-        "frame_realistic_16_reused", "render_full_16", "speckle_keyed", "speckle_bbox")
+ROWS = ("frame_realistic_16", "frame_realistic_16_full", "frame_realistic_16_support",
+        "frame_noise_free_256", "frame_noise_free_256_support", "frame_realistic_16_reused", "render_full_16", "speckle_keyed", "speckle_bbox")
 
 
 def main(argv=None) -> None:
@@ -73,6 +75,10 @@ def main(argv=None) -> None:
         cache = SceneCache()
         fns["frame_realistic_16_full"] = lambda: simulate_frame(
             rig, obj, spp=16, seed=1, noise="realistic", support="full")
+        fns["frame_realistic_16_support"] = lambda: simulate_frame(
+            rig, obj, spp=16, seed=1, noise="realistic", support="geometric")
+        fns["frame_noise_free_256_support"] = lambda: simulate_frame(
+            rig, obj, spp=256, seed=1, noise="none", support="geometric")
         fns["frame_realistic_16_reused"] = lambda: simulate_frame(
             rig, obj, spp=16, seed=1, noise="realistic", scenes=cache)
     if {"speckle_keyed", "speckle_bbox"} & set(args.rows.split(",")):
