@@ -10,7 +10,7 @@ import pytest
 
 from lts360.cli import main
 
-pytest.importorskip("mitsuba")
+pytest.importorskip("mitsuba", reason="rendering needs Mitsuba 3 (installed by scripts/install.sh)")
 
 
 def _offsets(path):

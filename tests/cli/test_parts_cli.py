@@ -30,7 +30,7 @@ def render(tmp_path, name, spec, *extra):
 
 @pytest.fixture(scope="module")
 def variant():
-    mi = pytest.importorskip("mitsuba")
+    mi = pytest.importorskip("mitsuba", reason="rendering needs Mitsuba 3 (installed by scripts/install.sh)")
     if "llvm_ad_mono" not in mi.variants():
         pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
 

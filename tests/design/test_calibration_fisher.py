@@ -428,7 +428,7 @@ def test_to_uncertainty_has_the_calibration_layout_and_can_be_drawn_from(rig_pla
 
 
 def test_drjit_ops_agree_with_numpy(rig_plan):
-    pytest.importorskip("drjit")
+    pytest.importorskip("drjit", reason="needs Dr.Jit (installed with Mitsuba 3)")
     from drjit.llvm.ad import Float64
 
     _, X = _camera_boards(rig_plan)

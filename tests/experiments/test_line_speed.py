@@ -49,7 +49,7 @@ def test_robust_error_ignores_a_few_gross_points():
 
 @pytest.mark.slow
 def test_line_speed_study_end_to_end(tmp_path):
-    mi = pytest.importorskip("mitsuba")
+    mi = pytest.importorskip("mitsuba", reason="rendering needs Mitsuba 3 (installed by scripts/install.sh)")
     mi.set_variant("llvm_ad_mono")
     from lts360.experiments.line_speed import run_line_speed_study
 

@@ -25,7 +25,7 @@ def measured(tmp_path_factory):
 
     from lts360.scenes.objects.profile_part import extrude_ring
 
-    mi = pytest.importorskip("mitsuba")
+    mi = pytest.importorskip("mitsuba", reason="rendering needs Mitsuba 3 (installed by scripts/install.sh)")
     if "llvm_ad_mono" not in mi.variants():
         pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
     root = tmp_path_factory.mktemp("hexbar")

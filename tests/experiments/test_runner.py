@@ -187,7 +187,7 @@ def test_a_different_plan_in_the_same_directory_is_refused(tmp_path):
 @pytest.fixture(scope="module")
 def dask_address():
     """Scheduler address of an in-process Dask cluster (one worker thread)."""
-    distributed = pytest.importorskip("distributed")
+    distributed = pytest.importorskip("distributed", reason="the Dask cluster path needs dask.distributed (test extras)")
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                                   dashboard_address=None) as cluster:
         yield cluster.scheduler_address

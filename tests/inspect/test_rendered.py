@@ -13,7 +13,7 @@ pytestmark = pytest.mark.slow
 
 @pytest.fixture(scope="module")
 def inspected(tmp_path_factory):
-    mi = pytest.importorskip("mitsuba")
+    mi = pytest.importorskip("mitsuba", reason="rendering needs Mitsuba 3 (installed by scripts/install.sh)")
     if "llvm_ad_mono" not in mi.variants():
         pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
     root = tmp_path_factory.mktemp("rendered")
@@ -87,7 +87,7 @@ def test_the_deviation_from_the_nominal_agrees_with_the_score(inspected):
 def alu_scan(tmp_path_factory):
     """The alu pipe's crest (z = 0, its waviness curving 0.16 /mm along the axis) in a scan of
     five sections 0.5 mm apart, measured with the twin shaped along the axis and straight."""
-    mi = pytest.importorskip("mitsuba")
+    mi = pytest.importorskip("mitsuba", reason="rendering needs Mitsuba 3 (installed by scripts/install.sh)")
     if "llvm_ad_mono" not in mi.variants():
         pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
     d = tmp_path_factory.mktemp("alu-scan")
@@ -123,7 +123,7 @@ def realistic(tmp_path_factory):
     """Small realistic scans (the coverage study's smaller set, STUDIES.md "Inspection under
     noise"): the PVC pipe (oval, dented) and the plug gauge, 4 sections 1 mm apart each, 8 spp,
     realistic sensor noise, measured with the true calibration, inspected with the truth."""
-    mi = pytest.importorskip("mitsuba")
+    mi = pytest.importorskip("mitsuba", reason="rendering needs Mitsuba 3 (installed by scripts/install.sh)")
     if "llvm_ad_mono" not in mi.variants():
         pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
     root = tmp_path_factory.mktemp("realistic")

@@ -41,7 +41,7 @@ def shots(rig):
 
 @pytest.fixture(scope="module")
 def variant():
-    mi = pytest.importorskip("mitsuba")
+    mi = pytest.importorskip("mitsuba", reason="rendering needs Mitsuba 3 (installed by scripts/install.sh)")
     if "llvm_ad_mono" not in mi.variants():
         pytest.skip("llvm_ad_mono not available")
     mi.set_variant("llvm_ad_mono")

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 mi = pytest.importorskip("mitsuba", reason="the simulator needs Mitsuba 3")
-dr = pytest.importorskip("drjit")
+dr = pytest.importorskip("drjit", reason="needs Dr.Jit (installed with Mitsuba 3)")
 
 from lts360.experiments import interreflection as ir
 

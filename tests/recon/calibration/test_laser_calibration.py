@@ -89,7 +89,7 @@ def test_board_pose_leaves_out_a_shifted_column():
     """A column of corners 0.8 px off (the SB detector next to a narrow margin) must not tilt
     the board plane: synthetic 7×6 × 2 mm board at 165 mm, exact corners but that column.
     Guarded: the true pose to 1e-4° (measured ~1e-5°); kept, the column tilts it by 0.8°."""
-    pytest.importorskip("cv2")
+    pytest.importorskip("cv2", reason="calibration needs OpenCV")
     from scipy.spatial.transform import Rotation
 
     from lts360.geometry.camera import project_camera_points
@@ -140,7 +140,7 @@ def test_board_pose_in_mirror_fixes_the_depth_that_one_view_cannot():
     give the true pose; with 0.1 px of corner noise the depth at the board's centre is an
     order of magnitude better from both views than from the direct view (measured at seed 0,
     20 draws: RMS 2.5 µm against 59 µm (left) and 73 µm (right))."""
-    pytest.importorskip("cv2")
+    pytest.importorskip("cv2", reason="calibration needs OpenCV")
     from lts360.geometry.camera import project_camera_points
     from lts360.geometry.mirror import reflect_points
     from lts360.recon.calibration.board import BoardGeometry
@@ -175,7 +175,7 @@ def test_board_pose_in_mirror_fixes_the_depth_that_one_view_cannot():
 def test_board_pose_in_mirror_leaves_out_a_shifted_column():
     """A column of virtual corners 0.8 px off must not move the pose (left out as an
     outlier); kept, it moves the board's centre by 11 µm (measured)."""
-    pytest.importorskip("cv2")
+    pytest.importorskip("cv2", reason="calibration needs OpenCV")
     from lts360.geometry.camera import project_camera_points
     from lts360.geometry.mirror import reflect_points
     from lts360.recon.calibration.board import BoardGeometry

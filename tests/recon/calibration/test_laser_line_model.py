@@ -11,7 +11,7 @@ from lts360.recon.calibration.board import BoardGeometry
 from lts360.recon.calibration.laser_line_model import fit_line_on_board
 from lts360.recon.calibration.laser_plane import laser_line_points
 
-pytest.importorskip("cv2")
+pytest.importorskip("cv2", reason="calibration needs OpenCV")
 
 
 def _shot(line_angle_deg, *, blur_px=2.0, band_mm=0.15, offset_mm=0.3, gain_per_mm=0.0):
