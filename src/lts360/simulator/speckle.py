@@ -229,14 +229,22 @@ def speckle_pattern(shape: tuple[int, int], *, pixel_pitch_um: float, wavelength
         power is conserved) and whose contrast follows :func:`speckle_contrast_theory`.
     """
     H, W = _check_shape(shape)
+    p, fc, s = _fine_grid(pixel_pitch_um, wavelength_nm, f_number, magnification, oversample,
+                          polarization, contrast_scale)
+    J = _intensity_sum(H * s, W * s, fc * p / s, s, polarization, rng, workers)
+    return _finish(J, contrast_scale)
+
+
+def _fine_grid(pixel_pitch_um, wavelength_nm, f_number, magnification, oversample,
+               polarization, contrast_scale) -> tuple[float, float, int]:
+    """The arguments of a pixel pattern checked; its pixel pitch (µm), the coherent cut-off
+    (cycles/µm) and the fine samples per pixel."""
     _positive("pixel_pitch_um", pixel_pitch_um)
     _check_polarization(polarization)
     _check_scale(contrast_scale)
     p = float(pixel_pitch_um)
     fc = coherent_cutoff_cyc_per_um(wavelength_nm, f_number, magnification)
-    s = _check_oversample(oversample, p, fc, wavelength_nm, f_number, magnification)
-    J = _intensity_sum(H * s, W * s, fc * p / s, s, polarization, rng, workers)
-    return _finish(J, contrast_scale)
+    return p, fc, _check_oversample(oversample, p, fc, wavelength_nm, f_number, magnification)
 
 
 def speckle_on_tiles(lit, *, pixel_pitch_um: float, wavelength_nm: float, f_number: float,
@@ -287,12 +295,8 @@ def speckle_on_tiles(lit, *, pixel_pitch_um: float, wavelength_nm: float, f_numb
         raise ValueError(f"lit must be a 2-D mask, got shape {lit.shape}")
     if not (isinstance(tile_px, (int, np.integer)) and tile_px >= 4):
         raise ValueError(f"tile_px must be an integer >= 4, got {tile_px!r}")
-    _positive("pixel_pitch_um", pixel_pitch_um)
-    _check_polarization(polarization)
-    _check_scale(contrast_scale)
-    p = float(pixel_pitch_um)
-    fc = coherent_cutoff_cyc_per_um(wavelength_nm, f_number, magnification)
-    s = _check_oversample(oversample, p, fc, wavelength_nm, f_number, magnification)
+    p, fc, s = _fine_grid(pixel_pitch_um, wavelength_nm, f_number, magnification, oversample,
+                          polarization, contrast_scale)
     fcd = fc * p / s
     radius = int(math.ceil(KEYED_PSF_RADIUS / (2.0 * fcd)))     # fine samples
     T = max(int(tile_px), 2 * -(-radius // s))
