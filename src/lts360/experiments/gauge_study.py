@@ -375,13 +375,10 @@ def format_gauge_table(ours: dict) -> str:
     return "\n".join(lines)
 
 
-#: The reference shots of the last compensation (key: calibration, rig, noise, spp, seed, scatter).
-_SHOTS: dict = {}
-
-
 def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str, spp: int,
                              seed: int, shots: int = 1, master: bool = False,
-                             bias_model: str = "none", max_scatter: int = 0) -> Path:
+                             bias_model: str = "none", max_scatter: int = 0,
+                             shot_cache: dict | None = None) -> Path:
     """§4.4: measure the gauge at the nominal position (``shots`` times, turned about its axis
     between shots: new speckle, new sensor noise), put the mirror views on one circle with the
     direct view (:func:`lts360.recon.calibration.compensation.joint_view_offsets`, all shots jointly),
@@ -413,16 +410,15 @@ def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str,
     grid = CylGrid.from_ranges((r - 1.0, r + 1.0), theta_step_deg=0.1, r_step_mm=0.005)
     results = []
     for k in range(int(shots)):
-        # the study's compensations (§4.4, master, master with twin) read the same shots
+        # a study's compensations (§4.4, master, master with twin) read the same shots
         key = (str(Path(cal_path).resolve()), os.stat(cal_path).st_mtime_ns, str(rig), noise,
                int(spp), seed + 777_777 + k, int(max_scatter))
-        if key not in _SHOTS:
-            for old in [o for o in _SHOTS if o[:5] + o[6:] != key[:5] + key[6:]]:
-                del _SHOTS[old]  # one study's shots at a time
-            _SHOTS[key] = simulate_frame(load_rig(rig), obj, spp=spp, seed=key[5], noise=noise,
-                                         pixels_xy=gauge_window_pixels(cal_path, r),
-                                         max_scatter=max_scatter).image
-        res = inverse_triangulate(_SHOTS[key], cal, grid)
+        cache = {} if shot_cache is None else shot_cache
+        if key not in cache:
+            cache[key] = simulate_frame(load_rig(rig), obj, spp=spp, seed=key[5], noise=noise,
+                                        pixels_xy=gauge_window_pixels(cal_path, r),
+                                        max_scatter=max_scatter).image
+        res = inverse_triangulate(cache[key], cal, grid)
         if master and bias_model == "twin":
             from lts360.twin import TwinCorrector, twin_corrected_raw
             from lts360.twin.rig import twin_design
@@ -447,11 +443,12 @@ def ensure_calibration(out: Path, calibration=None, *, rig: str = "paper", noise
                        seed: int = 0, spp: int = 16, compensate: bool = True,
                        calibrate_options: dict | None = None, compensation_shots: int = 1,
                        master: bool = False, bias_model: str = "none", say=print,
-                       max_scatter: int = 0) -> Path:
+                       max_scatter: int = 0, shot_cache: dict | None = None) -> Path:
     """The calibration a study measures with: ``calibration`` if given, else one estimated from
     rendered chessboard images into ``out/calibration/`` (kept for the next run); with
     ``compensate``, a copy with the §4.4 view offsets from ``compensation_shots`` shots of the
-    gauge (``out/calibration-compensated[-Kshots].json``)."""
+    gauge (``out/calibration-compensated[-Kshots].json``); ``shot_cache``: a dict the
+    compensations of one study share their rendered reference shots through."""
     from lts360.experiments.calibration_run import run_calibrate
 
     if calibration is None:
@@ -466,7 +463,7 @@ def ensure_calibration(out: Path, calibration=None, *, rig: str = "paper", noise
         calibration = _compensated_calibration(calibration, out, rig=rig, noise=noise, spp=spp,
                                                seed=seed, shots=compensation_shots,
                                                master=master, bias_model=bias_model,
-                                               max_scatter=max_scatter)
+                                               max_scatter=max_scatter, shot_cache=shot_cache)
     return calibration
 
 
@@ -492,7 +489,8 @@ def run_plug_gauge_study(out_dir, *, trials: int = 10, seed: int = 0, calibratio
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     kw = dict(rig=rig, noise=noise, seed=seed, spp=spp, calibrate_options=calibrate_options,
-              compensation_shots=compensation_shots, say=say, max_scatter=max_scatter)
+              compensation_shots=compensation_shots, say=say, max_scatter=max_scatter,
+              shot_cache={})
     raw = ensure_calibration(out, calibration, compensate=False, **kw)
     if bias_model == "twin" or steps:
         from lts360.recon.model import load_calibration
