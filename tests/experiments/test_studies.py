@@ -320,3 +320,18 @@ def test_bias_study_end_to_end(tmp_path):
     assert "twin-corrected" in format_bias_table(table)
     for name in ("table.json", "table.txt", "trials/results.nc"):
         assert (tmp_path / name).is_file()
+
+
+def test_a_gauge_study_names_what_its_column_measured():
+    """Every configuration's column says what it did, also one that is not a step of the table
+    (no §4.4 but the twin): the study's column was unlabelled there."""
+    from lts360.experiments.gauge_study import STEPS, _config_label, format_gauge_table
+
+    assert [_config_label(*conf) for _, _, conf in STEPS] == [
+        "no compensation", "§4.4", "§4.4 + master", "§4.4 + twin", "§4.4 + master + twin"]
+    assert _config_label(False, True, "twin") == "no compensation + twin"  # a master needs §4.4
+    row = {"mean_radius_error_mm": 0.001, "worst_std_mm": 0.03, "temperature_mm": 0.001,
+           "resolution_mm": 0.001, "expanded_uncertainty_mm": 0.06, "max_error_mm": 0.061,
+           "n_measurements": 10, "mean_coverage_deg": 360.0}
+    text = format_gauge_table(dict(row, ours="", ours_label="no compensation + twin"))
+    assert "(lts360: no compensation + twin)" in text

@@ -237,6 +237,14 @@ def _step_key(compensate: bool, master: bool, bias_model: str) -> str | None:
     return None
 
 
+def _config_label(compensate: bool, master: bool, bias_model: str) -> str:
+    """What a configuration does, in words (e.g. ``no compensation + twin``)."""
+    parts = ["§4.4" if compensate else "no compensation"]
+    parts += ["master"] if master and compensate else []
+    parts += ["twin"] if bias_model == "twin" else []
+    return " + ".join(parts)
+
+
 def plug_gauge_trial(trial: Trial) -> TrialOutput:
     """Render the gauge at the trial's placement (realistic noise) and measure it: with the
     study's configuration and, with ``steps``, with each of :data:`STEPS` (the same image)."""
@@ -323,6 +331,8 @@ def gauge_table(ds) -> dict:
                 label=labels.get(key, key))
     if ds.attrs.get("ours"):
         table["ours"] = str(ds.attrs["ours"])
+    if ds.attrs.get("ours_label"):
+        table["ours_label"] = str(ds.attrs["ours_label"])
     return table
 
 
@@ -350,8 +360,9 @@ def format_gauge_table(ours: dict) -> str:
         if key in ours:
             lines.append(f"{label:38s} " + " ".join(
                 f"{'—':>9s}" if key not in t else fmt.format(t[key]) for _, t in cols))
-    if ours.get("ours"):
-        lines.append(f"(lts360: {dict((k, lb) for k, lb, _ in STEPS).get(ours['ours'], ours['ours'])}"
+    label = dict((k, lb) for k, lb, _ in STEPS).get(ours.get("ours"), ours.get("ours_label"))
+    if label:
+        lines.append(f"(lts360: {label}"
                      + ("; §4.4: the paper's method on the same images)" if len(cols) == 3
                         else ")"))
     if steps:
@@ -512,7 +523,8 @@ def run_plug_gauge_study(out_dir, *, trials: int = 10, seed: int = 0, calibratio
     ours = _step_key(compensate, master, bias_model)
     ds = run_study(out / "trials", plan_trials(params, seed), plug_gauge_trial, name="plug-gauge",
                    workers=workers, dask_address=dask_address,
-                   attrs={"noise": noise, "spp": spp, "rig": rig, "ours": ours or ""})
+                   attrs={"noise": noise, "spp": spp, "rig": rig, "ours": ours or "",
+                          "ours_label": _config_label(compensate, master, bias_model)})
     table = gauge_table(ds)
     table["paper"] = PAPER_TABLE
     (out / "table.json").write_text(json.dumps(table, indent=2))
