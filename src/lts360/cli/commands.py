@@ -672,6 +672,8 @@ def cmd_inspect(args) -> int:
         raise UsageError("--upper-mm/--lower-mm: give both limits")
     if not args.lump_mm > 0:
         raise UsageError(f"--lump-mm: must be > 0, got {args.lump_mm}")
+    if not args.lump_arc_mm > 0:
+        raise UsageError(f"--lump-arc-mm: must be > 0, got {args.lump_arc_mm}")
     if not (args.u_radial_mm >= 0 and np.isfinite(args.u_radial_mm)):
         raise UsageError(f"--u-radial-mm: must be >= 0, got {args.u_radial_mm}")
     if not 2 <= args.draws <= 10000:
@@ -721,7 +723,8 @@ def cmd_inspect(args) -> int:
                         lump_threshold_mm=args.lump_mm, n_draws=args.draws, seed=args.seed,
                         u_radial_mm=u_radial, filter_upr=args.filter_upr,
                         use_filter=args.filter != "none", diameter_tol=diameter_tol,
-                        ovality_max_mm=ovality_max, source=str(args.cloud))
+                        ovality_max_mm=ovality_max, lump_arc_mm=args.lump_arc_mm,
+                        source=str(args.cloud))
     ins.data["command"] = "lts360 " + " ".join(shlex.quote(a) for a in args.argv) \
         if getattr(args, "argv", None) else None
     ins.data["calibration"] = args.calibration
@@ -743,6 +746,10 @@ def cmd_inspect(args) -> int:
     for e in d["scan"]["events"]:
         print(f"  {e['kind']} at z = {e['z_extreme_mm']:.2f} mm ({e['length_mm']:.2f} mm long, "
               f"{1e3 * e['deviation_mm']:+.1f} µm)")
+    for e in d["scan"]["local_events"]:
+        print(f"  local {e['kind']} at z = {e['z_extreme_mm']:.2f} mm, θ = {e['theta_deg']:.1f}° "
+              f"({e['arc_mm']:.1f} mm of arc): {1e3 * e['depth_mm']:+.1f} µm ± "
+              f"{1e3 * e['U_k2_mm']:.1f} (k = 2), p_noise {e['p_noise']:.2g}")
     if d["nominal"] and "pass" in d["nominal"]:
         print(f"  against {d['nominal']['source']}: {'PASS' if d['nominal']['pass'] else 'FAIL'}")
     if d["verdict"] is not None:

@@ -11,6 +11,7 @@ from lts360.cli.commands import (
     cmd_score,
 )
 from lts360.cli.usage import VARIANT_HELP
+from lts360.inspect.local_events import DEFAULT_ARC_MM
 from lts360.inspect.scan import DEFAULT_LUMP_MM
 from lts360.inspect.uncertainty import DEFAULT_DRAWS
 from lts360.recon.calibration.compensation import (
@@ -166,7 +167,11 @@ def _add_inspect_parser(sub) -> None:
     s.add_argument("--truth", default=None, help="rendered frame or scan directory: true "
                    "values beside the measured ones")
     s.add_argument("--lump-mm", type=float, default=DEFAULT_LUMP_MM,
-                   help=f"lump / neck-down threshold on Dmax / Dmin (default {DEFAULT_LUMP_MM:g})")
+                   help=f"lump / neck-down threshold on Dmax / Dmin, and the depth a local "
+                        f"lump or dent must be able to reach (default {DEFAULT_LUMP_MM:g})")
+    s.add_argument("--lump-arc-mm", type=float, default=DEFAULT_ARC_MM,
+                   help="σ (mm of arc) of the local lumps and dents the arc-matched detector "
+                        f"looks for (default {DEFAULT_ARC_MM:g})")
     s.add_argument("--u-radial-mm", type=float, default=0.0,
                    help="type-B standard uncertainty of a radial offset common to a section "
                         "(the rig's error budget): 2u on diameters, u on deviations")

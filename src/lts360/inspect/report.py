@@ -486,7 +486,44 @@ def _events_html(data: dict) -> str:
         events += (f"<p>Beyond {thr} but within what the noise alone gives (not significant, not "
                    "reported as events):</p>"
                    + _table(_EVENT_HEAD, _event_rows(scan["events_not_significant"])))
-    return events
+    return events + _local_events_html(data)
+
+
+_LOCAL_HEAD = ["kind", "z (mm)", "z span (mm)", "θ (deg)", "arc (deg)", "arc (mm)",
+               "depth (µm)", "U(k = 2) (µm)", "z score", "p_noise", "P(beyond threshold)",
+               "notes"]
+
+
+def _local_rows(evs: list[dict]) -> list[list[str]]:
+    """Rows of the arc-matched events' table (:mod:`lts360.inspect.local_events`)."""
+    return [[e["kind"], f"{e['z_extreme_mm']:.2f}", f"{e['z_start_mm']:.2f} … {e['z_end_mm']:.2f}",
+             f"{e['theta_deg']:.1f}", f"{e['arc_start_deg']:.1f} … {e['arc_end_deg']:.1f}",
+             f"{e['arc_mm']:.1f}", f"{1e3 * e['depth_mm']:+.1f}", f"{1e3 * e['U_k2_mm']:.1f}",
+             f"{e['z_score']:+.1f}", f"{e['p_noise']:.2g}", f"{100 * e['confidence']:.0f} %",
+             html.escape("; ".join(e.get("notes", []))) or "—"] for e in evs]
+
+
+def _local_events_html(data: dict) -> str:
+    """The arc-matched lumps and dents as HTML: the detector's settings, the events (or that
+    there is none) and those set apart."""
+    scan = data["scan"]
+    if "local_events_settings" not in scan:
+        return ""
+    st = scan["local_events_settings"]
+    if "critical_z" not in st:
+        return f"<p>Local lumps and dents: {html.escape(st.get('note', 'not searched'))}</p>"
+    out = (f"<h3>Local lumps and dents (matched to σ = {st['arc_sigma_mm']:g} mm of arc)</h3>"
+           f"<p>Each section's profile against the median of the sections farther along z, the "
+           f"deviation fitted by a Gaussian bump at every θ; significant where |z| > "
+           f"{st['critical_z']:.2f} ({100 * st['false_event_rate']:g} % false-event rate over "
+           f"the scan); depth against the reference form.</p>")
+    out += (_table(_LOCAL_HEAD, _local_rows(scan["local_events"])) if scan["local_events"]
+            else "<p>none significant</p>")
+    if scan.get("local_events_set_apart"):
+        out += ("<p>Set apart (significant, but below the threshold or the image of a longer "
+                "event in the reference):</p>"
+                + _table(_LOCAL_HEAD, _local_rows(scan["local_events_set_apart"])))
+    return out
 
 
 def _warnings_html(sections: list[dict]) -> str:

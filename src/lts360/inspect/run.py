@@ -19,6 +19,7 @@ from lts360.inspect.extremes import (
     default_upr,
     extreme_noise,
 )
+from lts360.inspect.local_events import DEFAULT_ARC_MM
 from lts360.inspect.nominal import Nominal, ToleranceBand, deviations, place_nominal
 from lts360.inspect.profile import DEFAULT_BIN_DEG, DEFAULT_GAP_DEG, valid_mask
 from lts360.inspect.section import MIN_POINTS, SectionResult, analyse_section
@@ -158,7 +159,8 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
                   bin_deg: float = DEFAULT_BIN_DEG, gap_deg: float = DEFAULT_GAP_DEG,
                   filter_upr: float | None = None, use_filter: bool = True,
                   extreme_draws: int = DEFAULT_EXTREME_DRAWS, diameter_tol=None,
-                  ovality_max_mm: float | None = None, source: str = "") -> Inspection:
+                  ovality_max_mm: float | None = None, lump_arc_mm: float = DEFAULT_ARC_MM,
+                  source: str = "") -> Inspection:
     """Inspect every section of ``cloud``.
 
     Parameters
@@ -188,6 +190,9 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
     ovality_max_mm : float, > 0, optional
         Size and ovality limits (:mod:`lts360.inspect.tolerances`); with them, or with
         ``band``, ``data["verdict"]`` holds the scan's PASS/FAIL.
+    lump_arc_mm : float, > 0
+        σ (mm of arc) of the lumps and dents the arc-matched detector looks for
+        (:mod:`lts360.inspect.local_events`).
 
     Raises
     ------
@@ -195,7 +200,7 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         No section has :data:`MIN_POINTS` valid points.
     """
     _check_arguments(u_radial_mm=u_radial_mm, filter_upr=filter_upr, band=band,
-                     nominal=nominal, use_filter=use_filter)
+                     nominal=nominal, use_filter=use_filter, lump_arc_mm=lump_arc_mm)
     ok = _valid_mask(cloud, source)
     form_upr = _form_upr(cloud, ok)
     filter_upr, filter_note = _filter_setting(use_filter, filter_upr, form_upr)
@@ -227,14 +232,14 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         "source": source, "n_sections": len(sections), "sections_skipped": skipped,
         "units": "lengths in mm, angles in deg; {value, u, U_k2}: U_k2 = 2u",
         "settings": settings,
-        "sections": rows, "scan": _scan(sections, rows, lump_threshold_mm),
+        "sections": rows, "scan": _scan(sections, rows, lump_threshold_mm, lump_arc_mm),
         "nominal": nom_out, "tolerances": tol_out, "verdict": verdict, "truth": truth_out}
     return inspection
 
 
 def _check_arguments(*, u_radial_mm: float, filter_upr: float | None,
                      band: ToleranceBand | None, nominal: Nominal | None,
-                     use_filter: bool) -> None:
+                     use_filter: bool, lump_arc_mm: float = DEFAULT_ARC_MM) -> None:
     """Refuse contradictory or out-of-range options (:class:`ValueError`, worded for the
     command line); returns nothing."""
     if not (u_radial_mm >= 0 and np.isfinite(u_radial_mm)):
@@ -246,6 +251,8 @@ def _check_arguments(*, u_radial_mm: float, filter_upr: float | None,
         raise ValueError("--tolerance-mm/--upper-mm/--lower-mm need --nominal")
     if not use_filter and filter_upr is not None:
         raise ValueError("--filter-upr: give it or --filter none, not both")
+    if not (np.isfinite(lump_arc_mm) and lump_arc_mm > 0):
+        raise ValueError(f"--lump-arc-mm: must be > 0, got {lump_arc_mm}")
 
 
 def _valid_mask(cloud: Cloud, source: str) -> np.ndarray:
@@ -477,7 +484,29 @@ def _section_time(cloud: Cloud, valid: np.ndarray) -> tuple[float, float] | None
     return float(np.median(t)), float(np.ptp(t))
 
 
-def _scan(sections: list[SectionResult], rows: list[dict], lump_mm: float) -> dict:
+def _local(sections: list[SectionResult], rows: list[dict], lump_mm: float,
+           arc_mm: float) -> dict:
+    """The arc-matched lumps and dents (:mod:`lts360.inspect.local_events`) from each
+    section's unfiltered profile and its bins' noise: ``local_events`` (significant, able to
+    reach the threshold), ``local_events_set_apart`` and ``local_events_settings``."""
+    from lts360.inspect.local_events import local_events
+    from lts360.inspect.profile import uniform_profile
+
+    grid = np.array([uniform_profile(s.extra.get("raw_profile", s.profile))[1]
+                     for s in sections])
+    ev, apart, info = local_events(
+        [s.z_mm for s in sections], grid, [r["extreme_noise"]["s_bin_mm"] for r in rows],
+        [r["extreme_noise"]["rho"] for r in rows],
+        float(np.median([s.ls.radius_mm for s in sections])),
+        indices=[s.index for s in sections], arc_mm=arc_mm, threshold_mm=lump_mm,
+        rate=scan_mod.FALSE_EVENT_RATE / 2)
+    return {"local_events": [e.__dict__ for e in ev],
+            "local_events_set_apart": [e.__dict__ for e in apart],
+            "local_events_settings": info}
+
+
+def _scan(sections: list[SectionResult], rows: list[dict], lump_mm: float,
+          lump_arc_mm: float = DEFAULT_ARC_MM) -> dict:
     z = np.array([s.z_mm for s in sections])
     val = lambda key: np.array([r[key]["value"] if r[key]["value"] is not None else np.nan  # noqa: E731
                                 for r in rows], dtype=float)
@@ -500,6 +529,7 @@ def _scan(sections: list[SectionResult], rows: list[dict], lump_mm: float) -> di
         u_d_max_mm=[x.get("d_max_mm", np.nan) for x in un] if all(un) else None)
     out["events"] = [e.__dict__ for e in ev if e.significant]
     out["events_not_significant"] = [e.__dict__ for e in ev if not e.significant]
+    out.update(_local(sections, rows, lump_mm, lump_arc_mm))
     if all("time_s" in r for r in rows):  # a moving object: when each event passed the laser
         t = np.array([r["time_s"] for r in rows])
         order = np.argsort(z)

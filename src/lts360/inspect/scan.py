@@ -22,11 +22,13 @@ stage position ``z_mm``.
   the extremes, :mod:`lts360.inspect.extremes`), and likewise Dmin's lower tail.
   ``p_noise`` is the probability that noise alone moves one section's Dmax (Dmin) this far
   from the scan's median, ``1 − exp(−exp(−dev/β − 0.3665))`` (0.3665 = −ln ln 2: the
-  median's place in the Gumbel); an event is significant where ``p_noise`` is below
+  median's place in the Gumbel); an event is significant where ``p_noise`` is below half of
   :data:`FALSE_EVENT_RATE` shared by the scan's ``2 n`` tests (the lump and the neck-down of
-  each section), so a smooth scan shows a false event in about 1 of 20 scans (on the
+  each section; the other half is the arc-matched detector's,
+  :mod:`lts360.inspect.local_events`), so a smooth scan shows a false event of either
+  detector in about 1 of 20 scans (on the
   realistic smooth PVC scan one section's noise moved Dmax 54 µm above the median: a lump by
-  the earlier rule, dev > U(k = 2); its p_noise, 0.01–0.04, is far above 0.05 / 40).  Each
+  the earlier rule, dev > U(k = 2); its p_noise, 0.01–0.04, is far above 0.025 / 40).  Each
   event also reports its confidence, the probability that the true deviation exceeds the
   threshold (normal, ``Φ((|dev| − threshold) / u)``).  Runs beyond the threshold but not
   significant are returned apart.
@@ -63,7 +65,8 @@ __all__ = ["Event", "AxisFit", "trend", "lumps_and_necks", "fit_axis", "cylindri
 DEFAULT_LUMP_MM = 0.05
 #: A tilt whose U(k = 2) exceeds this (deg) is "too short to tell".
 TILT_TELL_DEG = 0.05
-#: The scan's chance of one false lump or neck-down from noise alone.
+#: The scan's chance of one false lump or neck-down from noise alone (half for the diameter
+#: detector here, half for the arc-matched one, :mod:`lts360.inspect.local_events`).
 FALSE_EVENT_RATE = 0.05
 #: Periods a wavelength must fit in the scan to be named dominant.
 MIN_PERIODS = 2
@@ -155,7 +158,7 @@ def lumps_and_necks(z_mm, d_min_mm, d_max_mm, *, threshold_mm: float = DEFAULT_L
                 extra = {"u_mm": ue, "U_k2_mm": 2 * ue,
                          "confidence": float(norm.cdf((dev[k] - threshold_mm) / ue))
                          if ue > 0 else 1.0, "p_noise": p,
-                         "significant": bool(p < FALSE_EVENT_RATE / (2 * n_tests))}
+                         "significant": bool(p < FALSE_EVENT_RATE / 2 / (2 * n_tests))}
             out.append(Event(kind, float(z[run[0]]), float(z[run[-1]]),
                              float(z[run[-1]] - z[run[0]] + pitch), float(z[k]),
                              float(sign * dev[k]), [int(i) for i in ids[run]], **extra))
