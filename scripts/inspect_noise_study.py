@@ -8,7 +8,8 @@ Usage::
 realistic``) and ``cloud.ply`` (``lts360 measure scan --calibration
 scan/section_0000/frame.json``).  Each cloud is inspected with ``--truth scan``; printed: per
 scan and quantity (D min, D max, ovality, RONt against each circle) how many sections lie within
-their U(k = 2) of the truth, the events (lumps / neck-downs) found, the axis' tilt against the
+their U(k = 2) of the truth, the events (lumps / neck-downs of D max / D min, and the local
+lumps and dents of the arc-matched detector) found, the axis' tilt against the
 true one (0: the renders stand upright) and the dominant wavelength.  ``ROOT/summary.json``
 holds every number.
 """
@@ -47,10 +48,19 @@ def study(root: Path, extra: list[str]) -> dict:
         out[d.name] = {"exit": rc, "filter": data["settings"].get("filter", "none"), "sections": rows,
                        "events": scan["events"],
                        "events_not_significant": scan.get("events_not_significant", []),
+                       "local_events": scan.get("local_events", []),
+                       "local_events_set_apart": scan.get("local_events_set_apart", []),
+                       "local_events_settings": scan.get("local_events_settings", {}),
                        "axis": scan.get("axis"), "cylinder": scan.get("cylindricity"),
                        "spectrum": {k: v for k, v in scan.get("diameter_spectrum", {}).items()
                                     if k not in ("wavelength_mm", "amplitude_mm")}}
     return out
+
+
+def _local(e: dict) -> tuple:
+    """(kind, z, θ, depth µm, U µm, z score, p_noise) of an arc-matched event."""
+    return (e["kind"], e["z_extreme_mm"], round(e["theta_deg"], 1), round(1e3 * e["depth_mm"], 1),
+            round(1e3 * e["U_k2_mm"], 1), round(e["z_score"], 1), float(f"{e['p_noise']:.2g}"))
 
 
 def summarise(res: dict) -> None:
@@ -76,6 +86,11 @@ def summarise(res: dict) -> None:
               f"{ax.get('tilt_deg')} (U {ax.get('U_tilt_deg')}) {ax.get('note', '')}; "
               f"dominant wavelength {r['spectrum'].get('dominant_wavelength_mm')} "
               f"{r['spectrum'].get('note', '')}")
+        st = r["local_events_settings"]
+        print(f"   local events (critical z {st.get('critical_z', float('nan')):.2f}, noise scale "
+              f"{st.get('noise_scale', float('nan')):.2f}): "
+              f"{[_local(e) for e in r['local_events']]}; set apart "
+              f"{[_local(e) for e in r['local_events_set_apart']]}")
     print(f"all: {inside}/{total} values within U(k = 2) ({100 * inside / max(total, 1):.1f} %); "
           f"{undetermined} not determined by the points (not reported)")
 

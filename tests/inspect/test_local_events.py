@@ -88,14 +88,13 @@ def test_detected_at_the_predicted_power():
 
 @pytest.mark.parametrize("rho", [0.0, 0.5])
 def test_false_events_at_about_the_nominal_rate(rho):
-    """Noise alone, 150 seeded scans at a nominal family-wise rate of 20 %: white noise gives
-    it (measured 16.5 % on 200), AR(1) ρ = 0.5 fewer (8.5 %: Rice's formula counts more
-    crossings than a field this correlated makes); never more than nominal."""
+    """Noise alone, 150 seeded scans at a nominal family-wise rate of 20 %: both noises give
+    about it (measured on 200 scans: 23 % white, 23 % AR(1) ρ = 0.5; a little above nominal
+    from the noise scale's own noise); within half and 1.5 times nominal."""
     hits = sum(bool(_run(_scan(seed, 0.020, rho), 0.020, rho, rate=0.2)[0]
                     + _run(_scan(seed, 0.020, rho), 0.020, rho, rate=0.2)[1])
                for seed in range(150))
-    lo = 0.10 if rho == 0 else 0.04
-    assert lo * 150 <= hits <= 0.26 * 150, hits
+    assert 0.10 * 150 <= hits <= 0.30 * 150, hits
 
 
 def test_the_default_rate_gives_no_false_event_on_smooth_scans():
@@ -111,7 +110,9 @@ def test_a_scan_inside_a_long_dent_reports_the_dent_not_its_other_side():
     g = R + _ar1_noise(rng, N, M, 0.02, 0.0) - 0.3 * LUMP[None, :] * np.exp(
         -Z[:, None] ** 2 / (2 * 3.0 ** 2))
     ev, apart, _ = _run(_about_ls_centre(g), 0.020)
-    assert [e.kind for e in ev] == ["dent"] and ev[0].z_extreme_mm == 0.0
+    # each section's reference differs (the sections farther than 4 mm): the peak within a
+    # pitch of the dent's centre
+    assert [e.kind for e in ev] == ["dent"] and abs(ev[0].z_extreme_mm) <= PITCH
     assert all(e.kind == "lump" and not e.significant for e in apart
                if "other side" in " ".join(e.notes))
 

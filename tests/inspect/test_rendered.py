@@ -175,3 +175,36 @@ def test_no_false_lump_on_the_gauge_and_the_axis_of_a_short_scan(realistic):
         # 4 sections, 4 mm: no wavelength but the 2 mm one fits twice
         spec = data["scan"]["diameter_spectrum"]
         assert spec["dominant_wavelength_mm"] in (None, pytest.approx(2.0))
+
+
+@pytest.fixture(scope="module")
+def dent50(tmp_path_factory):
+    """A 50 µm dent over σ = 2 mm of arc and 2 mm along z on the realistic PVC pipe (oval
+    0.8 mm), 5 sections 2.5 mm apart centred on it, 8 spp, realistic noise, measured with the
+    true calibration: what the arc-matched detector is for (STUDIES.md "Inspection under
+    noise": D min alone cannot show it)."""
+    mi = pytest.importorskip("mitsuba", reason="rendering needs Mitsuba 3 (installed by scripts/install.sh)")
+    if "llvm_ad_mono" not in mi.variants():
+        pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
+    d = tmp_path_factory.mktemp("dent50")
+    scan = d / "scan"
+    assert main(["render", "--object", "pvc-pipe:dent=0.05,dent_sigma_arc_mm=2,dent_sigma_z_mm=2",
+                 "--out", str(scan), "--spp", "8", "--noise", "realistic", "--sections", "5",
+                 "--pitch-mm", "2.5", "--seed", "11"]) == 0
+    assert main(["measure", str(scan), "--calibration", str(scan / "section_0000" / "frame.json"),
+                 "--out", str(d / "cloud.ply")]) == 0
+    assert main(["inspect", str(d / "cloud.ply"), "--out", str(d / "r")]) == 0
+    return json.loads((d / "r" / "inspection.json").read_text())
+
+
+def test_a_50_um_dent_over_2_mm_of_arc_is_found_and_nothing_else(dent50, realistic):
+    """The dent, at its z and θ (−90°), its depth within its U of 50 µm less what the reference
+    (the sections ≥ 5 mm away: 0.2 µm of it) holds; no other local event on the scan, and none
+    on the plug gauge's 4 smooth realistic sections."""
+    ev = dent50["scan"]["local_events"]
+    assert [(e["kind"], e["z_extreme_mm"]) for e in ev] == [("dent", 0.0)], ev
+    e = ev[0]
+    assert abs(e["theta_deg"] + 90.0) <= 3.0
+    assert abs(-e["depth_mm"] - 0.050) <= e["U_k2_mm"]
+    assert e["p_noise"] < dent50["scan"]["local_events_settings"]["false_event_rate"]
+    assert realistic["plug-gauge"]["scan"]["local_events"] == []

@@ -177,7 +177,8 @@ def _add_inspect_parser(sub) -> None:
                         "(the rig's error budget): 2u on diameters, u on deviations")
     s.add_argument("--filter-upr", type=float, default=None,
                    help="ISO 12181-2 Gaussian filter cut-off in [1, 1000] UPR before roundness "
-                        "and diameters (default: the standard's for the diameter)")
+                        "and diameters (default: by the diameter, 15/50/150/500/1500 UPR up to Ø "
+                        "8/25/80/250 mm/above; docs/inspection.md)")
     s.add_argument("--filter", choices=("gaussian", "none"), default="gaussian",
                    help="none: no filter (extremes then carry more noise bias in U)")
     s.add_argument("--draws", type=int, default=DEFAULT_DRAWS,

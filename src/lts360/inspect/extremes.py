@@ -1,10 +1,11 @@
 """The ISO 12181-2 default filter of a section and the noise bias of its extremes.
 
 **Default filter.**  Roundness is defined on the profile through the Gaussian filter of ISO
-16610-21 with a cut-off in undulations per revolution (UPR) that ISO/TS 12181-2 chooses from
-the diameter (:data:`ISO_DEFAULT_UPR`: 15 UPR up to Ø 8 mm, 50 up to 25, 150 up to 80, 500 up to
-250, 1500 above; the values are the standard's series of cut-offs, the diameter breakpoints
-are not verified against its text).  :func:`default_upr` picks it; ``lts360 inspect`` applies
+16610-21 with a cut-off in undulations per revolution (UPR) chosen from the diameter
+(:data:`ISO_DEFAULT_UPR`: 15 UPR up to Ø 8 mm, 50 up to 25, 150 up to 80, 500 up to 250, 1500
+above: the standard series of cut-offs, each band's upper diameter keeping the cut-off
+wavelength π D / UPR at 1.57–1.68 mm; the breakpoints are not verified against the text of
+ISO 12181-2, which was not in reach: docs/inspection.md says what public sources do say).  :func:`default_upr` picks it; ``lts360 inspect`` applies
 it unless told ``--filter-upr N`` or ``--filter none``.
 
 **Extremes of noisy data are biased.**  D max, D min, ovality and RONt are read at the
@@ -60,7 +61,8 @@ __all__ = ["ISO_DEFAULT_UPR", "default_upr", "gaussian_transfer", "filter_grid",
            "extreme_quantities", "ExtremeNoise", "extreme_noise", "DEFAULT_EXTREME_DRAWS",
            "EXTREME_KEYS", "FILTER_UPR_RANGE", "denoised_form", "form_threshold"]
 
-#: ISO/TS 12181-2 default cut-off (UPR) by diameter: ``(largest diameter in mm, UPR)``.
+#: Default cut-off (UPR) by diameter: ``(largest diameter in mm, UPR)`` (the breakpoints are
+#: not verified against ISO 12181-2's text; docs/inspection.md).
 ISO_DEFAULT_UPR = ((8.0, 15.0), (25.0, 50.0), (80.0, 150.0), (250.0, 500.0),
                    (float("inf"), 1500.0))
 #: The cut-offs (UPR) a filter may be given, inclusive: from one undulation per revolution to
@@ -79,7 +81,7 @@ DEFAULT_CIRCLE_DRAWS = 32
 
 
 def default_upr(diameter_mm: float) -> float:
-    """The ISO/TS 12181-2 default cut-off (UPR) for a diameter (mm, > 0)."""
+    """The default cut-off (UPR) for a diameter (mm, > 0), :data:`ISO_DEFAULT_UPR`."""
     if not (np.isfinite(diameter_mm) and diameter_mm > 0):
         raise ValueError(f"diameter_mm must be finite and > 0, got {diameter_mm}")
     return next(upr for d_max, upr in ISO_DEFAULT_UPR if diameter_mm <= d_max)

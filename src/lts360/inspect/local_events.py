@@ -36,9 +36,10 @@ times smaller.  The detector:
    summed over the scan's sections it gives the family-wise ``p_noise = 1 − exp(−E)`` of an
    event whose peak reaches ``|z|``.  An event is significant where ``p_noise`` is below its
    share of the scan's false-event rate (half of :data:`lts360.inspect.scan.FALSE_EVENT_RATE`:
-   the other half is the diameter detector's).  On synthetic scans (white noise; 9 sections)
-   noise alone gave a false event in 23 % of 200 scans at a nominal 20 %, 3.0 % of 400 at the
-   default 2.5 %; with AR(1) ρ = 0.5, 19.5 % at 20 %.
+   the other half is the diameter detector's).  On synthetic scans (9 sections, white noise)
+   noise alone gave a false event in 23 % of 200 scans at a nominal 20 % and in 3.5 % of 400
+   at the default 2.5 %; with AR(1) noise of ρ = 0.5, in 23 % at 20 %: a little above
+   nominal (the scale's own noise, the approximations of Rice's formula).
 5. **Events.**  The cells beyond the critical ``c``, joined along θ (periodic, across gaps of
    less than half a σ) and between neighbouring sections, each of one sign: a lump (outward)
    or a dent.  Each reports its depth (the fitted amplitude at its peak), u and U(k = 2) of

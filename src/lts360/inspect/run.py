@@ -180,7 +180,7 @@ def inspect_cloud(cloud: Cloud, *, nominal: Nominal | None = None,
         nothing on centre, ovality, roundness or harmonics, where it cancels.
     filter_upr : float, [1, 1000], optional
         Cut-off of the ISO 12181-2 Gaussian filter applied before the reference circles and
-        diameters; default: the standard's default for the scan's median LS diameter
+        diameters; default: the cut-off for the scan's median LS diameter
         (:func:`lts360.inspect.extremes.default_upr`).
     use_filter : bool
         False: no filter (``--filter none``).
@@ -266,7 +266,7 @@ def _valid_mask(cloud: Cloud, source: str) -> np.ndarray:
 
 
 def _form_upr(cloud: Cloud, ok: np.ndarray) -> float | None:
-    """The standard's default filter cut-off (UPR) for the scan's median LS diameter, from
+    """The default filter cut-off (UPR) for the scan's median LS diameter, from
     the unfiltered valid points of every section with :data:`MIN_POINTS` of them; ``None``
     where no section has that many."""
     diameters = []
@@ -282,8 +282,9 @@ def _filter_setting(use_filter: bool, filter_upr: float | None,
     """The filter cut-off to apply (``None``: no filter) and its note for the report, from
     the options and the scan's default ``form_upr``."""
     if use_filter and filter_upr is None:
-        return form_upr, (f"ISO 12181-2 Gaussian, {form_upr:g} UPR (the standard's default "
-                          "for the scan's diameter)")
+        return form_upr, (f"ISO 12181-2 Gaussian, {form_upr:g} UPR (the default for the "
+                          "scan's diameter; the diameter table is not verified against the "
+                          "standard's text)")
     if use_filter:
         return filter_upr, f"ISO 12181-2 Gaussian, {filter_upr:g} UPR (--filter-upr)"
     return None, "none (--filter none)"
