@@ -77,6 +77,8 @@ DEFAULT_ARC_MM = 2.0
 MIN_REFERENCE = 3
 #: Flanks of a found event left out of the reference, in σ of arc either side.
 _FLANK_SIGMAS = 2.0
+#: The smallest u (mm) of an amplitude: a noise-free profile's u is 0, its z not infinite.
+_U_FLOOR_MM = 1e-9
 #: Half-width of the window of the local noise variance, in σ of arc.
 _VAR_SIGMAS = 3.0
 
@@ -325,6 +327,7 @@ def _field(r, th, var, kappa, sigma_bins, rate, rows, mask, per_bin):
     dev = _remove_size_and_centre(r - ref, th, mask)
     A, vA = matched_amplitude(dev, sigma_bins, var)
     u = np.sqrt(vA * (1.0 + np.pi / (2.0 * np.maximum(nref, 1))))
+    u = np.where(np.isfinite(u), np.maximum(u, _U_FLOOR_MM), np.nan)  # a noise-free profile
     with np.errstate(all="ignore"):
         z = A / u
     u, z = u * kappa, z / kappa
@@ -355,6 +358,9 @@ def local_events(z_mm, r_grid_mm, s_bin_mm, rho, radius_mm: float, *, indices=No
         event whose depth cannot reach it (``|A| + U < threshold``) is returned apart.
     rate : float
         The false-event rate of this detector over the whole scan.
+    guard_mm : float, optional
+        A section's reference is the median of the sections farther than this along z
+        (default: 2 ``arc_mm``, a lump about as long as it is wide).
 
     Returns
     -------
@@ -374,15 +380,19 @@ def local_events(z_mm, r_grid_mm, s_bin_mm, rho, radius_mm: float, *, indices=No
         raise ValueError(f"arc_mm and radius_mm must be > 0, got {arc_mm}, {radius_mm}")
     th = -np.pi + 2 * np.pi * np.arange(m) / m
     sigma_bins = arc_mm / radius_mm / (2 * np.pi / m)
+    guard = 2.0 * arc_mm if guard_mm is None else float(guard_mm)
     info = {"arc_sigma_mm": float(arc_mm), "arc_sigma_deg": float(np.degrees(arc_mm / radius_mm)),
-            "false_event_rate": float(rate), "reference": "median of the sections at each θ, "
-            "without the cells of found events where enough sections remain"}
+            "false_event_rate": float(rate),
+            "reference": f"median at each θ of the sections farther than "
+                         f"{guard:g} mm along z (at least {MIN_REFERENCE}), without the cells "
+                         f"of found events where {MIN_REFERENCE} remain"}
     if n < 2:
         info["note"] = "one section: no reference form to tell a local event from the form"
         return [], [], info
     var = _noise_var(r, sigma_bins)
     fallback = None
-    if _spread_along_z(r, th, var, sigma_bins) is None:  # too few sections: the residuals
+    whole = _spread_along_z(r, th, var, sigma_bins)
+    if whole is None:  # too few sections: the residuals
         # about each section's form, never below white
         fallback = np.sqrt(max(1.0, _correlation_factor(r, var, s_bin, rh, sigma_bins)))
         info["noise_scale_from"] = "the residuals about each section's form (too few sections)"
@@ -390,12 +400,13 @@ def local_events(z_mm, r_grid_mm, s_bin_mm, rho, radius_mm: float, *, indices=No
         info["noise_scale_from"] = ("second differences along z, without the cells of found "
                                     "events")
     per_bin = crossing_rate(sigma_bins, float(np.clip(np.nanmedian(rh), 0.0, 0.99)), m)
-    rows = _reference_rows(zs, 2.0 * arc_mm if guard_mm is None else guard_mm)
+    rows = _reference_rows(zs, guard)
     mask = np.zeros_like(r, bool)
     flank = int(round(_FLANK_SIGMAS * sigma_bins))
     for it in range(3):
-        kappa = fallback if fallback is not None else _spread_along_z(r, th, var, sigma_bins,
-                                                                      mask)
+        kappa = fallback
+        if kappa is None:  # without the events' cells, or with them where too few are left
+            kappa = _spread_along_z(r, th, var, sigma_bins, mask) or whole
         f = _field(r, th, var, kappa, sigma_bins, rate, rows, mask, per_bin)
         new = ndimage.binary_dilation(f["hit"], structure=np.ones((1, 2 * flank + 1), bool),
                                       border_value=0) if f["hit"].any() else f["hit"]
