@@ -40,9 +40,9 @@ placement of its centre) and each θ of a uniform grid:
 
 Where the model stops (not modelled): the coupling of the calibration's stages (its planes
 absorb its K error; the blocks are drawn independently); saturation and the exposure range;
-speckle correlated
-between pixels (speckle larger than a pixel); the noise of a master's radial offsets; glossy materials
-(the surface is white Lambertian); ambient light.  Every length in mm, angles in radians.
+speckle correlated between pixels (speckle larger than a pixel); the line-centre bias of a
+strongly defocused view beyond the blurred curve's (docs/design.md); glossy materials (the
+surface is white Lambertian); ambient light.  Every length in mm, angles in radians.
 
 The model runs in stages, one module each: :mod:`~lts360.design.laser`,
 :mod:`~lts360.design.camera`, :mod:`~lts360.design.noise`, :mod:`~lts360.design.calib_share`
@@ -118,7 +118,8 @@ class Conditions:
         The compensation's reference is a master of known diameter (``lts360 compensate
         --master-diameter-mm``): a radial offset per view is fitted beside the translations,
         which removes each view's line-centre bias at the master's diameter
-        (:mod:`lts360.design.bias`; the offsets' own noise is not modelled).
+        (:mod:`lts360.design.bias`); the compensation's noise share is then the mastered fit's
+        (:func:`lts360.design.shares.compensation_shares`).
     bias_model : str
         ``"twin"`` (the measurement removes the line-centre bias with its digital twin; it
         leaves :data:`lts360.design.bias.TWIN_RESIDUAL_FRACTION` of it) or ``"none"``.  What
