@@ -113,7 +113,7 @@ MEASURED_OPTIMUM = {6.0: (-17.6, -3.5, -4.0), 12.0: (-14.2, -1.7, -1.7),
 
 
 def test_bias_at_the_optimum_in_focus_views_near_the_defocused_direct_view_not():
-    """At the f/1.4 optimum the in-focus mirror views are at 0.46–0.79 of the measured bias;
+    """At the f/1.4 optimum the in-focus mirror views are at 0.41–0.79 of the measured bias;
     the direct view, 23 mm before the focus plane, reads 2.6–7.6× the closed form (and not
     ∝ 1/R): a mechanism of strong defocus the model lacks (docs/design.md)."""
     space = DesignSpace.create("paper")
