@@ -21,10 +21,28 @@ from lts360.scenes.rig_io import load_rig
     (["--calibration", "pyproject.toml"], "not a calibration JSON"),
     (["--compensation-shots", "0"], "compensation_shots: must be an integer in [1, 100]"),
     (["--compensation-diameter-mm", "-1"], "compensation_diameter_mm: must be a positive"),
+    (["--master", "--no-compensation"], "master: needs the compensation"),
 ])
 def test_optimize_bad_input(tmp_path, capsys, argv, message):
     out = tmp_path / "out"
     assert main(["design", "optimize", "--out", str(out), *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and "\n" not in err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("argv, message", [
+    ([], "--pipeline needs --out"),
+    (["--out", "OUT", "--seeds", "0,x"], "--seeds: comma-separated integers"),
+    (["--out", "OUT", "--seeds", "1,1"], "seeds: must be distinct integers"),
+    (["--out", "OUT", "--placements", "1"], "placements: must be an integer >= 2"),
+    (["--out", "OUT", "--placement-mm", "-1"], "placement"),
+    (["--out", "OUT", "--shares"], "--pipeline: not with --shares"),
+])
+def test_check_pipeline_bad_input(tmp_path, capsys, argv, message):
+    """``design check --pipeline``: one line, exit 2, before anything is rendered."""
+    argv = [str(tmp_path / "out") if a == "OUT" else a for a in argv]
+    assert main(["design", "check", "paper", "--pipeline", *argv]) == 2
     err = capsys.readouterr().err.strip()
     assert message in err and "\n" not in err
     assert list(tmp_path.iterdir()) == []
@@ -58,6 +76,11 @@ def test_optimize_writes_a_loadable_rig_and_the_report(tmp_path, capsys):
     assert opt["sigma_R_compensation_um"] > 0
     assert opt["U_um"] == pytest.approx(2 * opt["sigma_R_um"], rel=1e-9)
     assert "share: §4.4 compensation" in (out / "report.txt").read_text()
+    # the line-centre bias: the whole (negative) and what the twin leaves, a share of U
+    assert opt["line_centre_bias_um"] < 0
+    assert opt["sigma_R_bias_left_um"] == pytest.approx(0.1 * abs(opt["line_centre_bias_um"]),
+                                                        rel=1e-6)
+    assert "share: line-centre bias left" in (out / "report.txt").read_text()
 
 
 @pytest.mark.slow  # ~15 s: records the models with a calibration covariance

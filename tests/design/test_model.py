@@ -155,7 +155,8 @@ def test_paper_rig_values():
     """The paper rig's model figures (recorded here; STUDIES.md compares them with the
     simulation): per-point σ_r 34.5 µm, the image's own radius σ 1.81 µm for Ø20 mm, the
     §4.4 compensation's 5.71 µm (n_theta = 96; the simulation measured 34.6, 1.78 and
-    6.16 µm), full coverage; the total is the quadrature sum of the shares."""
+    6.16 µm), full coverage; the total is the quadrature sum of the shares (with the
+    line-centre bias the twin leaves)."""
     sp = DesignSpace.create("paper")
     e = M.evaluate(sp, None, M.Conditions(diameters_mm=(20.0,), n_theta=96), gradient=False)
     # The model is deterministic: each figure to 2 % of its value measured on 2026-12-04
@@ -165,7 +166,10 @@ def test_paper_rig_values():
     assert e.sigma_R_noise_um[0] == pytest.approx(1.813, rel=0.02)
     assert e.sigma_R_comp_um[0] == pytest.approx(5.706, rel=0.02)
     assert e.sigma_R_cal_um[0] < 1e-5  # the floor that keeps the square root smooth
+    # the line-centre bias the twin leaves (lts360.design.bias) is the fourth share
+    assert 0.0 < e.sigma_R_bias_um[0] < 0.5
     assert e.sigma_R_um[0] == pytest.approx(math.hypot(e.sigma_R_noise_um[0],
-                                                       e.sigma_R_comp_um[0]), rel=1e-6)
+                                                       e.sigma_R_comp_um[0],
+                                                       e.sigma_R_bias_um[0]), rel=1e-6)
     assert e.U_um[0] == pytest.approx(2 * e.sigma_R_um[0], rel=1e-12)
     assert e.coverage_deg[0] > 359.0

@@ -50,6 +50,7 @@ def _space_and_conditions(args):
                       compensate=not args.no_compensation,
                       compensation_diameter_mm=args.compensation_diameter_mm,
                       compensation_shots=args.compensation_shots,
+                      master=bool(args.master), bias_model=args.bias_model,
                       calibration=_calibration(args.calibration, space.base))
     return space, cond
 
@@ -188,6 +189,13 @@ def add_design_parser(sub) -> None:
                        help="the compensation's reference, centred (default the plug gauge)")
         q.add_argument("--compensation-shots", type=int, default=1,
                        help="reference images the compensation is fitted to")
+        q.add_argument("--master", action="store_true", help="the compensation's reference is "
+                       "a master of known diameter (lts360 compensate --master-diameter-mm): "
+                       "it removes each view's line-centre bias at that diameter")
+        q.add_argument("--bias-model", choices=("twin", "none"), default="twin",
+                       help="twin (default): the measurement removes the line-centre bias with "
+                       "its twin, which leaves a tenth of it; none: the whole bias is a share "
+                       "of U")
         q.add_argument("--calibration", default=None, metavar="plan|FILE|none",
                        help="add the calibration's share: 'plan' (the covariance predicted "
                        "for every design from lts360 calibrate's board plan of the base rig; "
@@ -236,6 +244,17 @@ def add_design_parser(sub) -> None:
                    help="the calibration share from these calibrations of the (one) rig: "
                         "each compensates and measures the gauge (render → calibrate → "
                         "compensate → measure)")
+    q.add_argument("--pipeline", action="store_true",
+                   help="the section's radius U(k=2) through the whole user pipeline, model "
+                        "beside it: per rig and seed, lts360 calibrate on rendered boards, "
+                        "compensation with the gauge as master, noisy placements measured "
+                        "with the twin (the plug-gauge study; needs --out)")
+    q.add_argument("--seeds", default="0,1,2",
+                   help="with --pipeline: calibration seeds (default 0,1,2)")
+    q.add_argument("--placements", type=int, default=5,
+                   help="with --pipeline: placements per seed (default 5)")
+    q.add_argument("--out", default=None,
+                   help="with --pipeline: output folder (OUT/<rig>/seed<S>/ is reused when done)")
     q.set_defaults(func=cmd_design_check)
 
 
@@ -256,6 +275,10 @@ def cmd_design_check(args) -> int:
     """``lts360 design check``: the design model against full simulation (renders)."""
     from lts360.cli.usage import _set_variant
 
+    if args.pipeline:
+        return _check_pipeline(args)
+    if args.out is not None:
+        raise UsageError("--out needs --pipeline")
     if args.calibrations is not None:
         return _check_calibrations(args)
     if not args.shares:
@@ -263,6 +286,32 @@ def cmd_design_check(args) -> int:
             raise UsageError("--placement-mm and --calibration need --shares")
         return _check_rigs(args)
     return _check_shares(args, _set_variant)
+
+
+def _check_pipeline(args) -> int:
+    from lts360.cli.usage import _set_variant
+    from lts360.experiments.design_pipeline import check_pipeline, format_pipeline
+
+    if args.out is None:
+        raise UsageError("--pipeline needs --out")
+    if args.shares or args.calibrations is not None or args.calibration is not None:
+        raise UsageError("--pipeline: not with --shares, --calibration or --calibrations")
+    try:
+        seeds = [int(v) for v in args.seeds.split(",") if v.strip()]
+    except ValueError:
+        raise UsageError(f"--seeds: comma-separated integers, got {args.seeds!r}") from None
+    _load_rigs(args.rigs)  # one line for a bad rig
+    _set_variant(None)
+    try:
+        res = check_pipeline(args.rigs, args.out, seeds=seeds, placements=args.placements,
+                             placement_mm=0.3 if args.placement_mm is None
+                             else args.placement_mm)
+    except ValueError as exc:
+        raise UsageError(_first_line(exc)) from None
+    print("\n".join(format_pipeline(res)))
+    if args.json:
+        _write_json(args.json, res)
+    return 0
 
 
 def _load_rigs(sources):

@@ -194,4 +194,5 @@ def shares_stage(e: Elements, space, views: dict, singles: list, noise: dict, gr
         {nm: [[at_user(v) for v in trio] for trio in dr_sums[nm]] for nm in dr_sums},
         {nm: [[at_ref(v) for v in trio] for trio in dr_sums[nm]] for nm in dr_sums},
         cov, [nm for nm in singles if nm != "direct"], dr.sqrt,
-        shots=int(cond.compensation_shots), compensate=bool(cond.compensate))
+        shots=int(cond.compensation_shots), compensate=bool(cond.compensate),
+        master=bool(cond.master))

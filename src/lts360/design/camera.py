@@ -152,7 +152,8 @@ def view_stage(e: Elements, lit_any) -> dict:
 
 
 def line_stage(e: Elements, views: dict, singles: list, laser: dict) -> None:
-    """Per single view, in place: the Jacobians ``jr``, ``jt`` (px per mm and per rad), the
+    """Per single view, in place: the Jacobians ``jr``, ``jt``, ``jz`` (px per mm, per rad, per
+    mm of height), the
     sensitivity ``sens`` (mm of radius per px across the line), the line's image width
     (``sig_geo`` the sheet projected across the line, ``sig_blur`` thin-lens defocus,
     ``sig_opt`` with diffraction, ``sig_w`` with the pixel box), ``arc_px`` (px per measured
@@ -187,7 +188,7 @@ def line_stage(e: Elements, views: dict, singles: list, laser: dict) -> None:
         jz = jac(V3(0.0 * ct, 0.0 * ct, 1.0 + 0.0 * ct))
         jt_norm = dr.sqrt(jt[0] * jt[0] + jt[1] * jt[1] + 1e-24)
         cross = jt[0] * jr[1] - jt[1] * jr[0]
-        vw.update(jr=jr, jt=jt, cross=dr.select(dr.abs(cross) > 1e-12, cross, 1e-12))
+        vw.update(jr=jr, jt=jt, jz=jz, cross=dr.select(dr.abs(cross) > 1e-12, cross, 1e-12))
         sens = jt_norm / dr.sqrt(cross * cross + 1e-24)  # mm per px across the line
         nz = (-jt[1] * jz[0] + jt[0] * jz[1]) / jt_norm
         sig_geo = sig_sheet_eff * dr.sqrt(nz * nz + 1e-24)

@@ -33,13 +33,16 @@ placement of its centre) and each θ of a uniform grid:
   and strongly defocused views.  The hard coverage is computed beside it from the rig itself;
 * the §4.4 compensation's share and the calibration's (:mod:`lts360.design.shares`; the
   calibration's covariance from a file, or predicted per design from the board plan,
-  :mod:`lts360.design.calib_covariance`), added in quadrature to the image's own.
+  :mod:`lts360.design.calib_covariance`), added in quadrature to the image's own;
+* the line-centre bias of the curved section (the sheet's thickness and the image's blur,
+  in closed form, :mod:`lts360.design.bias`), and what a master and the twin leave of it: a
+  share of the radius' uncertainty.
 
 Where the model stops (not modelled): the coupling of the calibration's stages (its planes
 absorb its K error; the blocks are drawn independently); saturation and the exposure range;
-speckle correlated
-between pixels (speckle larger than a pixel); the sheet's curvature bias; glossy materials
-(the surface is white Lambertian); ambient light.  Every length in mm, angles in radians.
+speckle correlated between pixels (speckle larger than a pixel); the line-centre bias of a
+strongly defocused view beyond the blurred curve's (docs/design.md); glossy materials (the
+surface is white Lambertian); ambient light.  Every length in mm, angles in radians.
 
 The model runs in stages, one module each: :mod:`~lts360.design.laser`,
 :mod:`~lts360.design.camera`, :mod:`~lts360.design.noise`, :mod:`~lts360.design.calib_share`
@@ -56,6 +59,7 @@ import math
 import numpy as np
 
 from lts360.design.backend import DrJitOps
+from lts360.design.bias import BIAS_MODELS, bias_stage
 from lts360.design.calib_covariance import CalibrationPlan
 from lts360.design.calib_share import plan_covariance_at, shares_stage
 from lts360.design.camera import Distortion, line_stage, rig_geometry, view_stage
@@ -110,6 +114,16 @@ class Conditions:
     compensation_diameter_mm, compensation_shots : float, int
         The reference: a centred round section of this diameter (the plug gauge), imaged
         ``compensation_shots`` times and fitted jointly.
+    master : bool
+        The compensation's reference is a master of known diameter (``lts360 compensate
+        --master-diameter-mm``): a radial offset per view is fitted beside the translations,
+        which removes each view's line-centre bias at the master's diameter
+        (:mod:`lts360.design.bias`); the compensation's noise share is then the mastered fit's
+        (:func:`lts360.design.shares.compensation_shares`).
+    bias_model : str
+        ``"twin"`` (the measurement removes the line-centre bias with its digital twin; it
+        leaves :data:`lts360.design.bias.TWIN_RESIDUAL_FRACTION` of it) or ``"none"``.  What
+        is left of the bias is a share of ``sigma_R_um``.
     calibration : CalibrationCovariance, CalibrationPlan or None
         The calibration's covariance (fixed), or a calibration plan whose covariance the
         model predicts for every design (:class:`lts360.design.calib_covariance.CalibrationPlan`);
@@ -131,6 +145,8 @@ class Conditions:
     compensate: bool = True
     compensation_diameter_mm: float = 19.9987
     compensation_shots: int = 1
+    master: bool = False
+    bias_model: str = "twin"
     calibration: CalibrationCovariance | None = None
 
     def __post_init__(self) -> None:
@@ -165,6 +181,11 @@ class Conditions:
                 and 1 <= self.compensation_shots <= 100):
             raise DesignError("compensation_shots: must be an integer in [1, 100], got "
                               f"{self.compensation_shots!r}")
+        if self.bias_model not in BIAS_MODELS:
+            raise DesignError(f"bias_model: must be one of {', '.join(BIAS_MODELS)}, got "
+                              f"{self.bias_model!r}")
+        if self.master and not self.compensate:
+            raise DesignError("master: needs the compensation (compensate=True)")
         if self.calibration is not None and not isinstance(
                 self.calibration, (CalibrationCovariance, CalibrationPlan)):
             raise DesignError("calibration: must be a CalibrationCovariance, a CalibrationPlan "
@@ -203,10 +224,15 @@ class Evaluation:
         shares: the image's noise, the compensation's, the calibration's), the rms
         per-point σ_r, the smooth single-view coverage and overlaps, the smooth share seen
         through both mirrors, the constraint penalty, the rms per-point σ_r of speckle alone.
-    sigma_R_noise_um, sigma_R_comp_um, sigma_R_cal_um : (n_cases,) float
+    sigma_R_noise_um, sigma_R_comp_um, sigma_R_cal_um, sigma_R_bias_um : (n_cases,) float
         The shares of ``sigma_R_um`` (added in quadrature): the measured image's own noise,
         the §4.4 compensation's noise (0 without compensation), the calibration's (0 without
-        a covariance).
+        a covariance), the line-centre bias the corrections leave (``|bias_left_um|``).
+    bias_um, bias_left_um : (n_cases,) float
+        The line-centre bias of the fitted radius (µm, :mod:`lts360.design.bias`): whole (no
+        correction), and what the conditions' master and twin leave of it.
+    bias_view_um : dict of (n_cases,) float
+        Each single view's mean line-centre bias (µm), whole.
     detail : dict or None
         Per view, per-element arrays (``theta_rad``, ``uv`` (n, 2) px, ``measured`` (soft),
         ``seen``, ``sigma_r_um``, ``sensitivity_mm_per_px``, ``width_px``, ``noise_px`` by term,
@@ -230,6 +256,10 @@ class Evaluation:
     sigma_R_noise_um: np.ndarray | None = None
     sigma_R_comp_um: np.ndarray | None = None
     sigma_R_cal_um: np.ndarray | None = None
+    sigma_R_bias_um: np.ndarray | None = None
+    bias_um: np.ndarray | None = None
+    bias_left_um: np.ndarray | None = None
+    bias_view_um: dict | None = None
     detail: dict | None = None
 
     @property
@@ -279,7 +309,12 @@ def evaluate(space: DesignSpace, x=None, conditions: Conditions | None = None, *
                       penalty_um=out["penalty_um"], speckle_rms_um=out["speckle_rms_um"],
                       sigma_R_noise_um=out["sigma_R_noise_um"],
                       sigma_R_comp_um=out["sigma_R_comp_um"],
-                      sigma_R_cal_um=out["sigma_R_cal_um"], detail=det)
+                      sigma_R_cal_um=out["sigma_R_cal_um"],
+                      sigma_R_bias_um=np.abs(out["bias_left_um"]), bias_um=out["bias_um"],
+                      bias_left_um=out["bias_left_um"],
+                      bias_view_um={k[6:-3]: v for k, v in out.items()
+                                    if k.startswith("biasv_")},
+                      detail=det)
 
 
 _FROZEN: dict = {}
@@ -424,8 +459,10 @@ def _run(o: DrJitOps, space: DesignSpace, cond: Conditions, pvec, grid: dict, *,
                                      at_ref)
     var_noise = at_user(noise["var_R"])
     cs = noise["cs"]
+    bias = bias_stage(e, views, singles, laser, noise, grid, at_user)
+    var_bias = (bias["bias_left_um"] * 1e-3) ** 2
     sigma_R_um = dr.sqrt(var_noise + dr.maximum(var_comp, 0.0) + dr.maximum(var_cal, 0.0)
-                         + 1e-18) * 1e3  # finite slope when 0
+                         + var_bias + 1e-18) * 1e3  # finite slope when 0
     U_um = 2.0 * sigma_R_um
     cover = coverage_stage(e, views, singles, doubles, at_user)
     res = dict(J_case=U_um + cover["penalty_um"], U_um=U_um, sigma_R_um=sigma_R_um,
@@ -433,7 +470,8 @@ def _run(o: DrJitOps, space: DesignSpace, cond: Conditions, pvec, grid: dict, *,
                speckle_rms_um=at_user(dr.sqrt(cs["msp2"] / (cs["m"] + 1e-30)) * 1e3),
                sigma_R_noise_um=dr.sqrt(var_noise + 1e-18) * 1e3,
                sigma_R_comp_um=dr.sqrt(dr.maximum(var_comp, 0.0) + 1e-18) * 1e3,
-               sigma_R_cal_um=dr.sqrt(dr.maximum(var_cal, 0.0) + 1e-18) * 1e3, **cover)
+               sigma_R_cal_um=dr.sqrt(dr.maximum(var_cal, 0.0) + 1e-18) * 1e3, **bias,
+               **cover)
     if gradient:
         res["grad"] = _worst_case_gradient(o, res["J_case"], p_all)
     res = {k: dr.detach(v) for k, v in res.items()}
@@ -474,7 +512,9 @@ def _detail(o: DrJitOps, views, singles, theta, n_th, n_case, n_user) -> dict:
             d.update(sigma_r_um=arr(vw["sigma_r_mm"]) * 1e3,
                      sensitivity_mm_per_px=arr(vw["sens"]), width_px=arr(vw["sig_w"]),
                      blur_px=arr(vw["sig_blur"]), sheet_px=arr(vw["sig_geo"]),
-                     e_peak=arr(vw["e_peak"]),
+                     e_peak=arr(vw["e_peak"]), bias_um=arr(vw["bias_mm"]) * 1e3,
+                     bias_um_per_psf2=arr(vw["bias_per_psf2"]) * 1e3,
+                     bias_um_per_sheet2=arr(vw["bias_per_sheet2"]) * 1e3,
                      noise_px={k: arr(v) for k, v in vw["noise"].items()})
             if "cal_dr" in vw:
                 d["cal_dr_mm"] = [arr(v) for v in vw["cal_dr"]]

@@ -51,6 +51,8 @@ class Candidate:
     sigma_R_noise_um: float = float("nan")
     sigma_R_comp_um: float = float("nan")
     sigma_R_cal_um: float = float("nan")
+    sigma_R_bias_um: float = float("nan")
+    bias_um: float = float("nan")
     seconds: float = 0.0
     reach_grid_best: list | None = None
 
@@ -62,7 +64,9 @@ class Candidate:
                 "objective_um": self.objective, "U_um": self.U_um,
                 "sigma_R_um": self.sigma_R_um, "sigma_R_noise_um": self.sigma_R_noise_um,
                 "sigma_R_compensation_um": self.sigma_R_comp_um,
-                "sigma_R_calibration_um": self.sigma_R_cal_um, "point_rms_um": self.point_rms_um,
+                "sigma_R_calibration_um": self.sigma_R_cal_um,
+                "sigma_R_bias_left_um": self.sigma_R_bias_um,
+                "line_centre_bias_um": self.bias_um, "point_rms_um": self.point_rms_um,
                 "coverage_smooth_deg": self.coverage_deg, "penalty_um": self.penalty_um,
                 "hard": self.hard, "evaluations": self.evaluations, "seconds": self.seconds,
                 "evaluations_seconds_to_beat_grid_best": self.reach_grid_best}
@@ -134,7 +138,8 @@ def _candidate(space, cond, x, label, *, evaluations=0, seconds=0.0) -> Candidat
                      hard=hard_metrics(space, x, cond), evaluations=evaluations, seconds=seconds,
                      sigma_R_noise_um=float(e.sigma_R_noise_um[k]),
                      sigma_R_comp_um=float(e.sigma_R_comp_um[k]),
-                     sigma_R_cal_um=float(e.sigma_R_cal_um[k]))
+                     sigma_R_cal_um=float(e.sigma_R_cal_um[k]),
+                     sigma_R_bias_um=float(e.sigma_R_bias_um[k]), bias_um=float(e.bias_um[k]))
 
 
 def grid_search(space: DesignSpace, cond: Conditions, *, points_per_axis: int = 3,
@@ -286,13 +291,13 @@ def conditions_dict(cond: Conditions) -> dict:
 def report_text(res: OptimizeResult) -> str:
     sp = res.space
     rows = [res.paper, res.grid_best, res.optimum]
-    head = f"{'':30s}" + "".join(f"{c.label:>20s}" for c in rows)
+    head = f"{'':36s}" + "".join(f"{c.label:>20s}" for c in rows)
     lines = [f"Rig design on the model (base rig {sp.base.name!r}; diameters "
              f"{', '.join(f'{d:g}' for d in res.conditions.diameters_mm)} mm, placement "
              f"{res.conditions.placement_mm:g} mm; worst case)", "", head]
 
     def row(name, fmt, get):
-        lines.append(f"{name:30s}" + "".join(f"{fmt.format(get(c)):>20s}" for c in rows))
+        lines.append(f"{name:36s}" + "".join(f"{fmt.format(get(c)):>20s}" for c in rows))
 
     for name in sp.free:
         i = sp.free.index(name)
@@ -302,6 +307,8 @@ def report_text(res: OptimizeResult) -> str:
     row("  share: image noise (µm)", "{:.3f}", lambda c: c.sigma_R_noise_um)
     row("  share: §4.4 compensation (µm)", "{:.3f}", lambda c: c.sigma_R_comp_um)
     row("  share: calibration (µm)", "{:.3f}", lambda c: c.sigma_R_cal_um)
+    row("  share: line-centre bias left (µm)", "{:.3f}", lambda c: c.sigma_R_bias_um)
+    row("line-centre bias, uncorrected (µm)", "{:+.2f}", lambda c: c.bias_um)
     row("σ per point, rms (µm)", "{:.2f}", lambda c: c.point_rms_um)
     row("coverage, smooth (°)", "{:.1f}", lambda c: c.coverage_deg)
     row("penalty (µm)", "{:.3g}", lambda c: c.penalty_um)
@@ -318,6 +325,8 @@ def report_text(res: OptimizeResult) -> str:
             if c.compensate else "no §4.4 compensation")
     cal = (f"the calibration's share ({c.calibration.source or 'given covariance'})"
            if c.calibration is not None else "no calibration share (a perfect calibration)")
+    fix = " + ".join((["a master of that diameter"] if c.compensate and c.master else [])
+                     + (["the twin"] if c.bias_model == "twin" else [])) or "no correction"
     lines += ["", f"U is the model's: speckle, sensor noise and pixel locking through the circle "
-              f"fit, {comp}, {cal} (docs/design.md)."]
+              f"fit, {comp}, {cal}, the line-centre bias {fix} leaves (docs/design.md)."]
     return "\n".join(lines)

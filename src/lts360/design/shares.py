@@ -200,8 +200,41 @@ def _moments(s6) -> list:
     return [[one, c, s], [c, cc, cs], [s, cs, ss]]
 
 
+def _regressors(views: list, mirror_views: list, master: bool) -> list:
+    """The reference fit's unknowns as ``(view or None, basis index, sign)``: ``None`` for
+    the section's own (radius and centre), else the view whose points it moves; the basis
+    (0: 1, 1: cos θ, 2: sin θ) and its sign in the points' model.
+
+    §4.4: ``(R, Cx, Cy)`` and a translation per mirror view (``−t·(cos, sin)``).  Mastered
+    (the radius known): ``(Cx, Cy)``, a radial offset per view and a translation per mirror
+    view."""
+    regs = ([] if master else [(None, 0, 1.0)]) + [(None, 1, 1.0), (None, 2, 1.0)]
+    if master:
+        regs += [(v, 0, -1.0) for v in views]
+    for v in mirror_views:
+        regs += [(v, 1, -1.0), (v, 2, -1.0)]
+    return regs
+
+
+def _normal_matrix(regs: list, sums: dict, views: list, zero) -> list:
+    """``Σ m b bᵀ`` (or the sandwich's ``S`` with the ``B`` sums) of the regressors."""
+    mom = {v: _moments(sums[v]) for v in views}
+    n = len(regs)
+    M = [[zero] * n for _ in range(n)]
+    for a, (va, fa, sa) in enumerate(regs):
+        for b, (vb, fb, sb) in enumerate(regs):
+            if b < a:
+                M[a][b] = M[b][a]
+                continue
+            both = views if va is None and vb is None else \
+                [v for v in views if (va is None or va == v) and (vb is None or vb == v)]
+            M[a][b] = sum((mom[v][fa][fb] for v in both), zero) * (sa * sb)
+    return M
+
+
 def compensation_shares(case_A: dict, ref_A: dict, ref_B: dict, case_dr: dict, ref_dr: dict,
-                        cov_cal, mirror_views: list, sqrt, *, shots: int, compensate: bool):
+                        cov_cal, mirror_views: list, sqrt, *, shots: int, compensate: bool,
+                        master: bool = False):
     """Variance of the radius from the compensation's noise and from the calibration.
 
     Parameters
@@ -219,6 +252,9 @@ def compensation_shares(case_A: dict, ref_A: dict, ref_B: dict, case_dr: dict, r
         The views that get a translation (every single view but the direct one).
     shots : int
         Reference images the compensation is fitted to (its noise falls as 1/shots).
+    master : bool
+        The reference's radius is known (a master): the fit has no radius and a radial
+        offset per view (:func:`_regressors`).
 
     Returns
     -------
@@ -232,42 +268,23 @@ def compensation_shares(case_A: dict, ref_A: dict, ref_B: dict, case_dr: dict, r
         Mc = [[Mc[i][j] + m[i][j] for j in range(3)] for i in range(3)]
     Pc = spd_inverse_ridged(Mc, sqrt)
     g = [Pc[0][0], Pc[0][1], Pc[0][2]]  # (M_c⁻¹ e0)
-    h = {}
-    for v in mirror_views:
+    regs = _regressors(views, mirror_views, bool(master))
+    # The case's radius per unit of each fitted unknown that moves a view's points (the
+    # points are corrected by subtracting the unknown's part of the model): −sign · gᵀ A_v[:, f].
+    resp = []
+    for v, f, sgn in regs:
+        if v is None:
+            resp.append(zero)
+            continue
         m = _moments(case_A[v])
-        h[v] = [g[0] * m[0][c] + g[1] * m[1][c] + g[2] * m[2][c] for c in (1, 2)]
+        resp.append(-sgn * (g[0] * m[0][f] + g[1] * m[1][f] + g[2] * m[2][f]))
+    nt = len(regs)
     var_comp, P = zero, None
     if compensate:
-        nt = 3 + 2 * len(mirror_views)
-
-        def joint(sums):
-            Mr = [[zero] * nt for _ in range(nt)]
-            tot = [[zero] * 3 for _ in range(3)]
-            for v in views:
-                m = _moments(sums[v])
-                tot = [[tot[i][j] + m[i][j] for j in range(3)] for i in range(3)]
-            for i in range(3):
-                for j in range(3):
-                    Mr[i][j] = tot[i][j]
-            for k, v in enumerate(mirror_views):
-                m = _moments(sums[v])
-                o = 3 + 2 * k
-                for a in range(2):
-                    for i in range(3):
-                        Mr[o + a][i] = -m[1 + a][i]
-                        Mr[i][o + a] = -m[i][1 + a]
-                    for b in range(2):
-                        Mr[o + a][o + b] = m[1 + a][1 + b]
-            return Mr
-
-        P = spd_inverse_ridged(joint(ref_A), sqrt)
-        S = joint(ref_B)
-        # Cov_t = P[t, :] S P[:, t] / shots, contracted with h at once: hᵀ P_t S P_tᵀ h.
-        hv = [zero] * 3
-        for v in mirror_views:
-            hv += h[v]
-        # x = P[:, t] h  (the reference's response to the case's h)
-        x = [sum((P[i][3 + j] * hv[3 + j] for j in range(nt - 3)), zero) for i in range(nt)]
+        P = spd_inverse_ridged(_normal_matrix(regs, ref_A, views, zero), sqrt)
+        S = _normal_matrix(regs, ref_B, views, zero)
+        # x = P r: the reference's response to the case's r; the share is xᵀ S x / shots.
+        x = [sum((P[i][j] * resp[j] for j in range(nt)), zero) for i in range(nt)]
         Sx = [sum((S[i][j] * x[j] for j in range(nt)), zero) for i in range(nt)]
         var_comp = sum((x[i] * Sx[i] for i in range(nt)), zero) * (1.0 / shots)
     var_cal = zero
@@ -280,15 +297,13 @@ def compensation_shares(case_A: dict, ref_A: dict, ref_B: dict, case_dr: dict, r
                 tot = [tot[c] + case_dr[v][k][c] for c in range(3)]
             val = g[0] * tot[0] + g[1] * tot[1] + g[2] * tot[2]
             if compensate:
-                y = [zero, zero, zero]
-                for v in views:
-                    y = [y[c] + ref_dr[v][k][c] for c in range(3)]
-                for v in mirror_views:
-                    y += [-ref_dr[v][k][1], -ref_dr[v][k][2]]
-                for j, v in enumerate(mirror_views):
-                    for a in range(2):
-                        t = sum((P[3 + 2 * j + a][i] * y[i] for i in range(len(y))), zero)
-                        val = val + h[v][a] * t
+                # y = Σ_ref m b δr^k, then the fitted unknowns P y move the case's radius
+                y = [sum((ref_dr[u][k][f] for u in views if v is None or u == v), zero) * sgn
+                     for v, f, sgn in regs]
+                for a in range(nt):
+                    if regs[a][0] is None:
+                        continue
+                    val = val + resp[a] * sum((P[a][i] * y[i] for i in range(nt)), zero)
             dR.append(val)
         for k in range(K):
             for l in range(K):

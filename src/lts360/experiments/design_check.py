@@ -407,9 +407,14 @@ def _model_shares(rig, placement_mm: float, uncertainty: dict | None, true_cal) 
     try:
         noise = evaluate(space, None, Conditions(**base, compensate=False), gradient=False)
         comp = evaluate(space, None, Conditions(**base, compensate=True), gradient=False)
+        # The simulation measures spreads: the total is the random shares' (the line-centre
+        # bias the twin would leave is reported apart, not part of it).
         out = {"case": list(comp.cases[case]), "noise_um": float(noise.sigma_R_noise_um[case]),
                "compensation_um": float(comp.sigma_R_comp_um[case]),
-               "calibration_um": None, "total_um": float(comp.sigma_R_um[case])}
+               "calibration_um": None,
+               "total_um": math.hypot(float(comp.sigma_R_noise_um[case]),
+                                      float(comp.sigma_R_comp_um[case])),
+               "bias_left_um": float(comp.bias_left_um[case])}
         if uncertainty is not None:
             planes = {m.name: m.n for m in true_cal.mirrors}
             planes["laser"] = true_cal.laser_plane[0]
@@ -418,7 +423,9 @@ def _model_shares(rig, placement_mm: float, uncertainty: dict | None, true_cal) 
             cal = evaluate(space, None, Conditions(**base, compensate=True, calibration=cov),
                            gradient=False)
             out["calibration_um"] = float(cal.sigma_R_cal_um[case])
-            out["total_um"] = float(cal.sigma_R_um[case])
+            out["total_um"] = math.hypot(float(cal.sigma_R_noise_um[case]),
+                                         float(cal.sigma_R_comp_um[case]),
+                                         float(cal.sigma_R_cal_um[case]))
     except (AttributeError, TypeError) as exc:  # the model without the shares' fields
         return {"error": f"model API not available: {type(exc).__name__}: {exc}"}
     return out
