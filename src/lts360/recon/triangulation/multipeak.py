@@ -17,7 +17,10 @@ running median of the valid rows that have no such second run):
   ``same_line_mm`` from it: a line split by a dark speckle is one line) lies more than
   ``match_mm + margin_mm`` from it: that run is the point (``FOUND``, or ``SATURATED`` /
   ``SATURATED_PLATEAU`` by its own samples; a run touching the band's end or a NaN sample is
-  never chosen);
+  never chosen).  Where the closest run is the one the detector already kept (its second
+  stayed below half), no margin is asked: the choice only confirms it;
+* a row decided joins the reference of the next pass, so a long stretch with two lines is
+  followed in from its ends (up to 180 passes);
 * otherwise the row is ``SEVERAL_PEAKS`` (no point): two lines and nothing to tell which;
 * no reference (fewer than ``min_reference`` unambiguous rows around it): the detector's
   result stays.
