@@ -456,9 +456,8 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
                                half_width_mm: float | None = None, peak: str = "centroid",
                                compensate: bool = False, backend: str = "auto",
                                progress=None, continuity_k: float | None = None,
-                               reject: bool = False,
-                               correct=None, multipeak: bool = True
-                               ) -> tuple[Cloud, CylGrid, BandLog]:
+                               reject: bool = False, correct=None,
+                               multipeak: bool = True) -> tuple[Cloud, CylGrid, BandLog]:
     """Inverse triangulation with the radial band found from the image.
 
     The first section runs the coarse pass (:class:`lts360.recon.triangulation.band.BandSearch`) and
@@ -469,13 +468,12 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
     first, on a band about the middle of the measurable radii), so that its rows say what was
     searched.
 
-    ``multipeak``: see :func:`make_runner`.
-
-    ``correct``: an optional ``(result, measure, plan) -> result`` applied to each section's
-    result, given the measuring function and plan that made it (a model-based line-centre bias
-    correction, :mod:`lts360.twin`, measures its own synthetic image with the same plan).  If
-    it has ``observe(result, z_mm=, origin_mm=)``, every section is shown to it (in order,
-    ``origin_mm`` the centre it was measured about) before the first is corrected.
+    ``multipeak``: see :func:`make_runner`.  ``correct``: an optional ``(result, measure,
+    plan) -> result`` applied to each section's result, given the measuring function and plan
+    that made it (a model-based line-centre bias correction, :mod:`lts360.twin`, measures its
+    own synthetic image with the same plan).  If it has ``observe(result, z_mm=, origin_mm=)``,
+    every section is shown to it (in order, ``origin_mm`` the centre it was measured about)
+    before the first is corrected.
 
     Returns
     -------
