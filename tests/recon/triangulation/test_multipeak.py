@@ -11,6 +11,7 @@ from lts360.recon.triangulation.grid import CylGrid
 from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
 from lts360.recon.triangulation.multipeak import (
     MultiPeakTolerances,
+    _main_runs,
     choose_peaks,
     choose_run,
     profile_runs,
@@ -41,6 +42,8 @@ def test_profile_runs_finds_every_run_and_the_detectors_centroid():
     np.testing.assert_allclose(centre[1], alone[0], atol=1e-9)
     assert peak[0] == prof[0].max() and peak[1] == prof[0, 100:].max() and peak[2] == prof[1].max()
     assert cut.tolist() == [False, False, False, True, False]
+    # each row's strongest run: the one the detector measured
+    assert _main_runs(row, peak).tolist() == [True, False, True, True, False]
 
 
 def test_choose_run_takes_the_line_the_neighbours_agree_with():

@@ -222,7 +222,19 @@ def _reference(grid, radii: np.ndarray, at: np.ndarray, tol: MultiPeakTolerances
     return out
 
 
-def _assembled(v, vp, grid, local, rows, chosen, prof, start, stop, peak, base, sat,
+def _main_runs(run_row: np.ndarray, peak: np.ndarray) -> np.ndarray:
+    """(m,) bool: each row's strongest run (the first of equal maxima, as the detector's
+    ``argmax``): the run the detector measured, whatever the rounding of its own sampling."""
+    m = len(run_row)
+    order = np.lexsort((np.arange(m), -peak, run_row))
+    first = np.ones(m, dtype=bool)
+    first[1:] = run_row[order][1:] != run_row[order][:-1]
+    out = np.zeros(m, dtype=bool)
+    out[order[first]] = True
+    return out
+
+
+def _assembled(v, vp, grid, local, rows, chosen, prof, start, stop, peak, base, is_main, sat,
                max_plateau_mm, plan, result, compensate):
     """View ``v`` again with each examined row's chosen run (``chosen``: :func:`choose_run`'s
     codes), assembled as :func:`assemble_view` does."""
@@ -233,7 +245,7 @@ def _assembled(v, vp, grid, local, rows, chosen, prof, start, stop, peak, base, 
     pick = chosen >= 0
     c = np.maximum(chosen, 0)
     peak_c = peak[c] if len(peak) else np.zeros(len(rows))
-    main = pick & (peak_c >= v.intensity[rows] * (1 - 1e-6))  # the detector's own run
+    main = pick & (is_main[c] if len(peak) else False)  # the detector's own run
     r = np.where(pick & ~main, base[c] if len(base) else r, r)
     q_pick = np.full(rows.size, Quality.FOUND, dtype=np.uint8)
     if sat is not None and len(peak):
@@ -290,10 +302,10 @@ def choose_peaks(result: InverseResult, image, plan: InversePlan, *, compensate:
         run_row, start, stop, centre, peak, cut = profile_runs(prof, thr)
         base = np.interp(centre, np.arange(grid.n_r), grid.r_mm)
         v = views[name]
-        kept = (peak >= v.intensity[rows][run_row] * (1 - 1e-6)) & \
-            (v.quality[rows][run_row] != Quality.SEVERAL_PEAKS)
+        is_main = _main_runs(run_row, peak)
+        kept = is_main & (v.quality[rows][run_row] != Quality.SEVERAL_PEAKS)
         data[name] = (rows, local, prof, run_row, start, stop, peak, cut, base,
-                      base + grid.r_shift_mm[rows][run_row], kept)
+                      base + grid.r_shift_mm[rows][run_row], kept, is_main)
     radii = np.stack([np.where(v.valid & ~examined[n], v.r_raw_mm, np.nan)
                       for n, v in views.items()])
     chosen = {n: np.full(len(data[n][0]), -2) for n in names}
@@ -317,9 +329,10 @@ def choose_peaks(result: InverseResult, image, plan: InversePlan, *, compensate:
     new_views = dict(views)
     for name in names:
         v, vp = views[name], plan.views[name]
-        rows, local, prof, run_row, start, stop, peak, cut, base, _, _ = data[name]
+        rows, local, prof, run_row, start, stop, peak, cut, base, _, _, is_main = data[name]
         if rows.size == 0:
             continue
         new_views[name] = _assembled(v, vp, grid, local, rows, chosen[name], prof, start, stop,
-                                     peak, base, sat, max_plateau_mm, plan, result, compensate)
+                                     peak, base, is_main, sat, max_plateau_mm, plan, result,
+                                     compensate)
     return dataclasses.replace(result, views=new_views)
