@@ -10,8 +10,9 @@ not grow.  Measured 2026-12-04 (the choice of f1754e5; 16 spp, realistic noise, 
 the paper's pitch about the middle of the measured zone, seeds 11–13), without → with:
 cut tube 5961 → 6029 valid points, 226 → 170 ``SEVERAL_PEAKS`` rows, 7 → 2 points off by
 > 0.2 mm, largest error 894 → 776 µm; alu pipe 6144 → 6185, 170 → 129, 7 → 6, 273 → 273 µm.
-On the examples' scans (STUDIES.md) the points off by > 0.2 mm do grow on some objects without
-a shiny line's secondary stripes (the cables, +2 to +9): the claim is for shiny objects.
+On the examples' short scans (STUDIES.md) the points off by > 0.2 mm do grow on objects that
+are not shiny (the cables +1 to +9, the grooved shaft +2, the undercut shaft +7 without
+interreflections): the claim is for shiny objects.
 """
 
 from __future__ import annotations
