@@ -110,6 +110,9 @@ def cmd_render(args) -> int:
             obj.material, roughness_alpha=args.roughness))
     if obj.notes.get("part"):  # a user's part: it must fit between the mirrors
         check_in_field(obj, rig)
+    from lts360.scenes.materials import resolve_max_scatter
+
+    args.max_scatter = resolve_max_scatter(args.max_scatter, obj.material)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UsageError(f"--out: {str(out)!r} exists and is not a directory")
@@ -306,7 +309,7 @@ def cmd_measure(args) -> int:
             sections, cal, theta_step_deg=args.theta_step_deg, r_step_mm=args.r_step_mm,
             half_width_mm=args.band_mm, peak=args.peak, compensate=args.compensate,
             backend=args.backend, progress=progress, continuity_k=args.continuity_k,
-            reject=args.reject == "on", correct=twin)
+            reject=args.reject == "on", correct=twin, multipeak=args.multipeak == "on")
         searched = log.describe()
     else:
         grid = CylGrid.from_ranges((radius - band_mm, radius + band_mm),
@@ -314,7 +317,7 @@ def cmd_measure(args) -> int:
         cloud = measure_sections(sections, cal, grid, peak=args.peak, compensate=args.compensate,
                                  backend=args.backend, method=args.method, progress=progress,
                                  continuity_k=args.continuity_k, reject=args.reject == "on",
-                                 correct=twin)
+                                 correct=twin, multipeak=args.multipeak == "on")
     dt = time.perf_counter() - t0
     coverages = section_coverage(cloud, grid, n_sections=len(sections),
                                  windows_in_cloud=args.method == "inverse")

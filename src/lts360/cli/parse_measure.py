@@ -70,6 +70,11 @@ def _add_measure_parser(sub) -> None:
                         "(within 0.5 mm of a stretch of a view's window where its line faded "
                         "out) and NOTCH (the profile 80 µm below its chord at ±0.5/±1 mm: a "
                         "notch the sheet does not resolve); default on")
+    s.add_argument("--multipeak", choices=("on", "off"), default="on",
+                   help="with --reject on: where a second line along a radial direction reaches "
+                        "a fifth of the main one (interreflections), take the one the "
+                        "section's other rows agree with, or call the row SEVERAL_PEAKS; "
+                        "off: the strongest line, SEVERAL_PEAKS from half (default on)")
     s.add_argument("--min-coverage", type=float, default=DEFAULT_MIN_COVERAGE,
                    help="refuse (exit 3) a section that measures less than this share of the "
                         f"θ coverage its views predict (default {DEFAULT_MIN_COVERAGE:g}); a "

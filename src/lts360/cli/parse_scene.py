@@ -47,8 +47,11 @@ def _add_render_parser(sub) -> None:
     s.add_argument("--scale", type=float, default=1.0, help="image scale in (0, 1]")
     s.add_argument("--max-bounces", type=int, choices=tuple(range(MAX_BOUNCES + 1)), default=2,
                    help="mirror reflections followed on camera and laser paths (default 2)")
-    s.add_argument("--max-scatter", type=int, choices=tuple(range(MAX_SCATTER + 1)), default=0,
-                   help="interreflections of the laser light on the object (default 0: none)")
+    s.add_argument("--max-scatter", choices=("auto",) + tuple(str(k) for k in range(MAX_SCATTER + 1)),
+                   default="auto",
+                   help="interreflections of the laser light on the object: bounces 0-3, or auto "
+                        "(default): 1 for a shiny material (specular weight >= 0.5: machined or "
+                        "polished aluminium, brass, glossy plastic), 0 otherwise")
     s.add_argument("--roughness", type=float, default=None, metavar="ALPHA",
                    help="override the GGX roughness α of the object's material, in (0, 1]")
     s.add_argument("--pinhole", action="store_true", help="pinhole instead of the thin lens")

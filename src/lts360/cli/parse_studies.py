@@ -66,8 +66,10 @@ def _add_plug_gauge(studies) -> None:
                    help="placements drawn uniformly in a disc of radius R mm about the axis "
                    "(default 0.3); results are also reported against the distance from it")
     _add_user_steps(q)
-    q.add_argument("--max-scatter", type=int, choices=tuple(range(MAX_SCATTER + 1)), default=0,
-                   help="interreflections of the laser light in the gauge's images (default 0)")
+    q.add_argument("--max-scatter", choices=("auto",) + tuple(str(k) for k in range(MAX_SCATTER + 1)),
+                   default="auto",
+                   help="interreflections of the laser light in the gauge's images: 0-3, or "
+                        "auto (default): 0 for the ground-steel gauge (not shiny)")
     q.set_defaults(func=cmd_study_plug_gauge)
 
 
@@ -129,8 +131,13 @@ def _add_examples(studies) -> None:
                    "(default: the frames' true one)")
     q.add_argument("--section-scale", type=float, default=1.0,
                    help="fraction of the paper's sections to scan (quick looks)")
-    q.add_argument("--max-scatter", type=int, choices=tuple(range(MAX_SCATTER + 1)), default=0,
-                   help="interreflections of the laser light (default 0: none)")
+    q.add_argument("--max-scatter", choices=("auto",) + tuple(str(k) for k in range(MAX_SCATTER + 1)),
+                   default="auto",
+                   help="interreflections of the laser light: 0-3, or auto (default): 1 for the "
+                        "shiny objects (alu-pipe, cut-tube, polished-shaft), 0 for the others")
+    q.add_argument("--frames", default=None, help="keep each scan's frames in this folder and "
+                   "measure the stored ones when the same scan is asked for again (a changed "
+                   "measurement re-run without rendering)")
     q.set_defaults(func=cmd_study_examples)
 
 

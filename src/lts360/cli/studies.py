@@ -72,7 +72,7 @@ def cmd_study_plug_gauge(args) -> int:
                                  placement_mm=args.placement_mm, master=args.master,
                                  bias_model=args.bias_model, compensate=args.compensate,
                                  steps=args.steps, workers=args.workers or 1,
-                                 max_scatter=args.max_scatter, **common)
+                                 max_scatter=_gauge_max_scatter(args.max_scatter), **common)
     print(format_gauge_table(table))
     print(f"wrote {args.out}/ (table.txt, table.json, plug-gauge.png, trials/results.nc)")
     return 0
@@ -116,6 +116,14 @@ def cmd_study_monte_carlo(args) -> int:
     return 0
 
 
+def _gauge_max_scatter(value) -> int:
+    """``--max-scatter`` of the plug-gauge study: ``auto`` by the gauge's material."""
+    from lts360.scenes.materials import resolve_max_scatter
+    from lts360.scenes.objects import build_object
+
+    return resolve_max_scatter(value, build_object("plug-gauge").material)
+
+
 def cmd_study_examples(args) -> int:
     from lts360.experiments.examples_study import (
         EXTRA_EXAMPLES,
@@ -134,7 +142,7 @@ def cmd_study_examples(args) -> int:
     table = run_examples_study(args.out, objects=objects, noise=args.noise, spp=args.spp,
                                calibration=args.calibration, section_scale=args.section_scale,
                                workers=args.workers or 1, max_scatter=args.max_scatter,
-                               **common)
+                               frames_dir=args.frames, **common)
     print(format_examples(table))
     print(f"wrote {args.out}/ (table.txt, clouds/*.ply, figures/*.png, trials/results.nc)")
     return 0

@@ -26,7 +26,8 @@ import numpy as np
 
 from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study, trial_setup
 
-__all__ = ["PAPER_EXAMPLES", "EXTRA_EXAMPLES", "examples_trial", "run_examples_study", "format_examples"]
+__all__ = ["PAPER_EXAMPLES", "EXTRA_EXAMPLES", "examples_trial", "examples_params", "render_scan", "stored_scan", "measure_scan",
+           "run_examples_study", "format_examples"]
 
 #: Paper §4.6: object → (figure, sections, pitch mm).
 PAPER_EXAMPLES = {
@@ -41,40 +42,89 @@ VIEW_COLOURS = {0: "tab:red", 1: "tab:blue", 2: "tab:green"}
 
 def examples_trial(trial: Trial) -> TrialOutput:
     """Render and measure one object's scan; write its cloud and figure; return its metrics."""
+    p = trial.params
+    frames = p.get("frames", "")
+    scan = stored_scan(p, trial.seed, frames) if frames else render_scan(p, trial.seed)
+    return measure_scan(p, scan)
+
+
+def _same_trial(p: dict) -> dict:
+    """The parameters that make a scan's frames (not where the study writes)."""
+    return {k: v for k, v in p.items() if k not in ("out", "frames", "calibration")}
+
+
+def stored_scan(p: dict, seed: int, frames_dir) -> dict:
+    """:func:`render_scan`'s frames, read from ``frames_dir/<object>.npz`` when that file holds
+    the scan of the same parameters and seed, else rendered and stored there (so that a
+    study measured again after a change of the measurement renders nothing)."""
+    path = Path(frames_dir) / f"{p['object']}.npz"
+    key = json.dumps(_same_trial(p), sort_keys=True)
+    if path.exists():
+        with np.load(path) as f:
+            if str(f["params"]) == key and int(f["seed"]) == int(seed):
+                return {"images": f["images"], "z_mm": f["z_mm"],
+                        "truth": json.loads(str(f["truth"])), "render_s": float(f["render_s"])}
+    scan = render_scan(p, seed)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp.npz")
+    np.savez_compressed(tmp, images=scan["images"], z_mm=scan["z_mm"],
+                        truth=json.dumps(scan["truth"]), render_s=scan["render_s"],
+                        params=key, seed=int(seed))
+    tmp.replace(path)
+    return scan
+
+
+def render_scan(p: dict, seed: int) -> dict:
+    """The frames of one trial's scan (trial parameters ``p``, the trial's ``seed``): a dict
+    with ``images`` (n, H, W), ``z_mm`` (n,), ``truth`` (the first frame's rig truth, JSON
+    types) and ``render_s`` (wall time of all frames)."""
+    import time
+
+    from lts360.simulator.frame import simulate_frame
+    from lts360.simulator.reuse import SceneCache
+
+    rig, obj = trial_setup(p)
+    n, pitch = int(p["sections"]), float(p["pitch_mm"])
+    zc = float(np.mean(obj.measured_zone_z_mm))
+    zs = zc + (np.arange(n) - (n - 1) / 2.0) * pitch
+    images, t_render, rig_truth = [], 0.0, None
+    scenes = SceneCache()  # built once for the object's scan: each section moves it
+    for k, z in enumerate(zs):
+        t0 = time.perf_counter()
+        frame = simulate_frame(rig, obj, z_mm=float(z), spp=int(p["spp"]),
+                               seed=seed + k, noise=p["noise"], scenes=scenes,
+                               max_scatter=int(p.get("max_scatter", 0)))
+        t_render += time.perf_counter() - t0
+        if rig_truth is None:
+            rig_truth = json.loads(json.dumps(frame.truth, default=lambda v: v.tolist()))
+        images.append(frame.image)
+    return {"images": np.stack(images), "z_mm": zs, "truth": rig_truth, "render_s": t_render}
+
+
+def measure_scan(p: dict, scan: dict) -> TrialOutput:
+    """Measure the frames of :func:`render_scan` as ``lts360 measure`` does (the band found
+    from the image, the rejections on unless ``p["reject"]`` is false), write the object's
+    cloud, figure and inspection under ``p["out"]`` and return the trial's metrics."""
     import time
 
     from lts360.experiments.score import score_cloud
     from lts360.recon.model import calibration_from_frame_truth, load_calibration
     from lts360.recon.triangulation.cloud import write_cloud
     from lts360.recon.triangulation.measure import Section, measure_sections_following
-    from lts360.simulator.frame import simulate_frame
 
-    p = trial.params
-    rig, obj = trial_setup(p)
-    n, pitch = int(p["sections"]), float(p["pitch_mm"])
-    zc = float(np.mean(obj.measured_zone_z_mm))
-    zs = zc + (np.arange(n) - (n - 1) / 2.0) * pitch
-    from lts360.simulator.reuse import SceneCache
-
-    cal, sections, t_render, rig_truth = None, [], 0.0, None
-    scenes = SceneCache()  # built once for the object's scan: each section moves it
-    for k, z in enumerate(zs):
-        t0 = time.perf_counter()
-        frame = simulate_frame(rig, obj, z_mm=float(z), spp=int(p["spp"]),
-                               seed=trial.seed + k, noise=p["noise"], scenes=scenes,
-                               max_scatter=int(p.get("max_scatter", 0)))
-        t_render += time.perf_counter() - t0
-        if rig_truth is None:
-            rig_truth = json.loads(json.dumps(frame.truth, default=lambda v: v.tolist()))
-        if cal is None:
-            cal = load_calibration(p["calibration"]) if p["calibration"] else \
-                calibration_from_frame_truth(rig_truth)
-        sections.append(Section(Path(f"{obj.name}-{k:03d}"), float(z), image=frame.image))
+    _, obj = trial_setup(p)
+    zs, rig_truth = np.asarray(scan["z_mm"], dtype=float), scan["truth"]
+    n, t_render = len(zs), float(scan["render_s"])
+    cal = load_calibration(p["calibration"]) if p["calibration"] else \
+        calibration_from_frame_truth(rig_truth)
+    sections = [Section(Path(f"{obj.name}-{k:03d}"), float(z), image=img)
+                for k, (z, img) in enumerate(zip(zs, scan["images"]))]
     # the radial band found from the image, as `lts360 measure` does with no --radius-mm
     t0 = time.perf_counter()
     cloud, _, band_log = measure_sections_following(
         sections, cal, theta_step_deg=float(p["theta_step_deg"]),
-        r_step_mm=float(p["r_step_mm"]), reject=p.get("reject", True))
+        r_step_mm=float(p["r_step_mm"]), reject=p.get("reject", True),
+        multipeak=p.get("multipeak", True))
     t_measure = time.perf_counter() - t0
     out = Path(p["out"])
     (out / "clouds").mkdir(parents=True, exist_ok=True)
@@ -164,16 +214,16 @@ def _figure(obj, cloud, zs, path: Path, metrics: dict) -> None:
     tmp.replace(path)
 
 
-def run_examples_study(out_dir, *, objects=None, seed: int = 0, noise: str = "realistic",
-                       spp: int = 16, calibration=None, theta_step_deg: float = 0.2,
-                       r_step_mm: float = 0.01, section_scale: float = 1.0, rig: str = "paper",
-                       workers: int | None = 1, dask_address: str | None = None,
-                       max_scatter: int = 0) -> dict:
-    """Run the examples; ``section_scale`` < 1 scans fewer sections (quick looks);
-    ``max_scatter`` > 0 renders the laser light's interreflections (the objects of
-    :data:`EXTRA_EXAMPLES` may be named too)."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+def examples_params(out: Path, *, objects=None, noise: str = "realistic", spp: int = 16,
+                    calibration=None, theta_step_deg: float = 0.2, r_step_mm: float = 0.01,
+                    section_scale: float = 1.0, rig: str = "paper",
+                    max_scatter: int | str = "auto") -> list[dict]:
+    """The trials' parameters of :func:`run_examples_study` (one per object, in order);
+    ``max_scatter`` ``"auto"``: per object, by its material
+    (:func:`lts360.scenes.materials.auto_max_scatter`)."""
+    from lts360.scenes.materials import resolve_max_scatter
+    from lts360.scenes.objects import build_object
+
     names = list(objects or PAPER_EXAMPLES)
     params = []
     for name in names:
@@ -186,9 +236,33 @@ def run_examples_study(out_dir, *, objects=None, seed: int = 0, noise: str = "re
                        "pitch_mm": pitch, "noise": noise, "spp": spp, "rig": rig,
                        "calibration": "" if calibration is None else str(Path(calibration).resolve()),
                        "theta_step_deg": theta_step_deg, "r_step_mm": r_step_mm,
-                       "out": str(out.resolve())})
-        if max_scatter:  # only then: the trials of earlier studies keep their parameters
-            params[-1]["max_scatter"] = int(max_scatter)
+                       "out": str(Path(out).resolve())})
+        ms = resolve_max_scatter(max_scatter, build_object(name).material
+                                 if max_scatter == "auto" else None)
+        if ms:  # only then: the trials of earlier studies keep their parameters
+            params[-1]["max_scatter"] = ms
+    return params
+
+
+def run_examples_study(out_dir, *, objects=None, seed: int = 0, noise: str = "realistic",
+                       spp: int = 16, calibration=None, theta_step_deg: float = 0.2,
+                       r_step_mm: float = 0.01, section_scale: float = 1.0, rig: str = "paper",
+                       workers: int | None = 1, dask_address: str | None = None,
+                       max_scatter: int | str = "auto", frames_dir=None) -> dict:
+    """Run the examples; ``section_scale`` < 1 scans fewer sections (quick looks);
+    ``max_scatter`` > 0 renders the laser light's interreflections, ``"auto"`` (default) one
+    bounce for the shiny objects (alu pipe, cut tube, polished shaft) and none for the others
+    (the objects of :data:`EXTRA_EXAMPLES` may be named too); ``frames_dir``: keep each scan's frames there
+    and measure the stored ones when a later study asks for the same scan
+    (:func:`stored_scan`)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    params = examples_params(out, objects=objects, noise=noise, spp=spp, calibration=calibration,
+                             theta_step_deg=theta_step_deg, r_step_mm=r_step_mm,
+                             section_scale=section_scale, rig=rig, max_scatter=max_scatter)
+    if frames_dir is not None:
+        for q in params:
+            q["frames"] = str(Path(frames_dir).resolve())
     ds = run_study(out / "trials", plan_trials(params, seed), examples_trial, name="examples",
                    workers=workers, dask_address=dask_address)
     table = {}

@@ -48,6 +48,10 @@ def _compare(ref, fast_result, *, min_found=100):
         assert np.max(np.abs(a.r_mm[both] - b.r_mm[both])) < 2e-5
         # Peak grey values: float32 Keys weights on the device, float64 in the reference.
         np.testing.assert_allclose(b.intensity[a.window], a.intensity[a.window], rtol=1e-4)
+        # the second run's maximum (multipeak's input) the same way, NaN where there is none
+        np.testing.assert_array_equal(np.isnan(a.second), np.isnan(b.second))
+        ok = ~np.isnan(a.second)
+        np.testing.assert_allclose(b.second[ok], a.second[ok], rtol=1e-4)
 
 
 def test_fast_path_matches_the_numpy_reference(case, fast):
@@ -140,8 +144,9 @@ def test_profile_walk_matches_main_run_and_centroid():
     threshold, saturation = 1.5, 6.0
     flat = mod.Float(prof.ravel())
     base = dr.arange(mod.UInt32, n) * nr
-    centre, q, peak = _walk_profiles(dr, mod, lambda j: dr.gather(mod.Float, flat, base + j),
-                                     n, nr, threshold, saturation, 0.5, 2)
+    centre, q, peak, other = _walk_profiles(
+        dr, mod, lambda j: dr.gather(mod.Float, flat, base + j), n, nr, threshold, saturation,
+        0.5, 2)
     ref = centroid(prof.astype(float), np.arange(nr, dtype=float), threshold=threshold,
                    saturation=saturation, max_plateau_mm=2.0)
     assert np.array_equal(np.asarray(q, dtype=np.uint8), ref.quality)
@@ -152,6 +157,9 @@ def test_profile_walk_matches_main_run_and_centroid():
     pk = np.asarray(peak, dtype=float)
     assert np.array_equal(np.isfinite(pk), np.isfinite(ref.intensity))
     assert np.allclose(pk[np.isfinite(pk)], ref.intensity[np.isfinite(pk)])
+    ot = np.asarray(other, dtype=float)  # the other runs' largest maximum, as main_run's
+    assert np.array_equal(np.isfinite(ot), np.isfinite(ref.second))
+    assert np.allclose(ot[np.isfinite(ot)], ref.second[np.isfinite(ot)])
     assert {int(v) for v in np.unique(ref.quality)} == {0, 1, 2, 3, 5, 6}
 
 

@@ -178,6 +178,8 @@ def _walk_profiles(dr, mod, sample, n: int, nr: int, threshold: float,
         ``TRUNCATED``, ``SATURATED_PLATEAU``).
     peak : Float
         Largest sample (−inf for an all-NaN profile).
+    other : Float
+        Largest maximum of the other runs (−inf where there is none).
     """
     Float, UInt32, Bool = mod.Float, mod.UInt32, mod.Bool
     thr = dr.opaque(Float, threshold)
@@ -240,7 +242,7 @@ def _walk_profiles(dr, mod, sample, n: int, nr: int, threshold: float,
     several = has & (other >= dr.opaque(Float, fraction) * peak)
     q = dr.select(several, UInt32(int(Quality.SEVERAL_PEAKS)), q)
     q = dr.select(has & b_cut, UInt32(int(Quality.TRUNCATED)), q)
-    return centre, q, peak
+    return centre, q, peak, other
 
 
 class FastInverse:
@@ -344,9 +346,9 @@ class FastInverse:
                 acc = wy[k] * row if acc is None else acc + wy[k] * row
             return acc
 
-        centre, q, peak = _walk_profiles(dr, mod, sample, n, self.nr, threshold, saturation,
-                                         fraction, max_plateau)
-        return self._r0 + self._step * centre, q, peak
+        centre, q, peak, other = _walk_profiles(dr, mod, sample, n, self.nr, threshold,
+                                                saturation, fraction, max_plateau)
+        return self._r0 + self._step * centre, q, peak, other
 
     def peaks(self, image, *, threshold: float, saturation: float | None,
               second_peak_fraction: float = DEFAULT_SECOND_PEAK_FRACTION,
@@ -361,24 +363,26 @@ class FastInverse:
                 raise ValueError(f"image has shape {img.shape}, the plan was built for {self.shape}")
         if self._n_rows == 0:
             return {name: PeakResult(r_mm=np.zeros(0), quality=np.zeros(0, np.uint8),
-                                     intensity=np.zeros(0)) for name in self._rows}
+                                     intensity=np.zeros(0), second=np.zeros(0))
+                    for name in self._rows}
         table = self._tap_table(img)
-        rc, q, peak = self._profile_kernel(table, float(threshold),
-                                           None if saturation is None else float(saturation),
-                                           float(second_peak_fraction),
-                                           plateau_samples(max_plateau_mm, self.plan.grid.r_mm))
-        dr.eval(rc, q, peak)
+        rc, q, peak, other = self._profile_kernel(
+            table, float(threshold), None if saturation is None else float(saturation),
+            float(second_peak_fraction), plateau_samples(max_plateau_mm, self.plan.grid.r_mm))
+        dr.eval(rc, q, peak, other)
         r_all = np.asarray(rc, dtype=float)
         q_all = np.asarray(q, dtype=np.uint8)
         p_all = np.asarray(peak, dtype=float)
+        o_all = np.asarray(other, dtype=float)
         res = {}
         for name, (a, b) in self._rows.items():
-            r, quality, pk = r_all[a:b], q_all[a:b], p_all[a:b]
+            r, quality, pk, ot = r_all[a:b], q_all[a:b], p_all[a:b], o_all[a:b]
             keep = np.isfinite(r) | (quality == Quality.NO_PEAK) | (quality == Quality.TRUNCATED)
             quality = np.where(keep, quality, np.uint8(Quality.NO_PEAK)).astype(np.uint8)
             r = np.where(quality == Quality.NO_PEAK, np.nan, r)
             res[name] = PeakResult(r_mm=r, quality=quality,
-                                   intensity=np.where(np.isfinite(pk), pk, np.nan))
+                                   intensity=np.where(np.isfinite(pk), pk, np.nan),
+                                   second=np.where(np.isfinite(ot), ot, np.nan))
         return res
 
     def __call__(self, image, *, threshold: float | None = None, saturation: float | None = None,

@@ -297,6 +297,9 @@ class ViewResult:
     window : (nθ,) bool
     offset_mm : (2,) float
         Residual compensation applied (zeros if none).
+    second : (nθ,) float or None
+        Largest sample of the profile's other runs above the threshold (NaN where there is
+        none or outside the window; ``None`` where the detector did not say).
     """
 
     name: str
@@ -307,6 +310,7 @@ class ViewResult:
     intensity: np.ndarray
     window: np.ndarray
     offset_mm: np.ndarray
+    second: np.ndarray | None = None
 
     @property
     def valid(self) -> np.ndarray:
@@ -411,6 +415,10 @@ def assemble_view(view_plan: ViewPlan, grid: CylGrid, peaks: PeakResult, *,
     r_raw[idx] = peaks.r_mm + grid.r_shift_mm[idx]  # base radii -> this θ's band
     quality[idx] = peaks.quality
     intensity[idx] = peaks.intensity
+    second = None
+    if peaks.second is not None:
+        second = np.full(n, np.nan)
+        second[idx] = peaks.second
     keep = np.isin(quality, np.asarray([int(q) for q in accept], dtype=np.uint8))
     r = np.where(keep, r_raw, np.nan)
     if radial_offset_mm != 0.0 or scale != 1.0:
@@ -419,7 +427,7 @@ def assemble_view(view_plan: ViewPlan, grid: CylGrid, peaks: PeakResult, *,
     r = _shift_on_rays(grid.theta_rad, r, offset, grid.is_full_turn)
     return ViewResult(name=view_plan.view.name, theta_rad=grid.theta_rad, r_mm=r, r_raw_mm=r_raw,
                       quality=quality, intensity=intensity, window=view_plan.window,
-                      offset_mm=offset)
+                      offset_mm=offset, second=second)
 
 
 # -- results -----------------------------------------------------------------------------------

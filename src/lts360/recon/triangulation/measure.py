@@ -165,10 +165,13 @@ class _Rejecting:
     ``last_raw`` keeps the last result as measured, for the scan's own pass
     (:func:`_reject_scan`)."""
 
-    def __init__(self, measure, continuity_k: float | None, hidden: dict | None = None):
+    def __init__(self, measure, continuity_k: float | None, hidden: dict | None = None,
+                 plan: InversePlan | None = None, compensate: bool = False):
         self.measure = measure
         self.continuity_k = continuity_k
         self.hidden = hidden
+        self.plan = plan
+        self.compensate = compensate
         self.last_raw = None
 
     def __call__(self, img):
@@ -179,6 +182,10 @@ class _Rejecting:
         )
 
         raw = self.measure(img)
+        if self.plan is not None:  # a second line along the radius: choose, or say so
+            from lts360.recon.triangulation.multipeak import choose_peaks
+
+            raw = choose_peaks(raw, img, self.plan, compensate=self.compensate)
         self.last_raw = raw if not self.hidden else mark_hidden(raw, self.hidden)
         res = reject_spurious(self.last_raw)
         k = self.continuity_k
@@ -200,7 +207,7 @@ def _reject_scan(done: list, raws: list, continuity_k: float | None, frames=None
 
 def make_runner(cal: Calibration, *, peak: str = "centroid", backend: str = "auto",
                 compensate: bool = False, continuity_k: float | None = None,
-                reject: bool = False, hidden: dict | None = None):
+                reject: bool = False, hidden: dict | None = None, multipeak: bool = True):
     """A function ``plan -> (image -> InverseResult)`` on the chosen backend.
 
     ``backend``: ``numpy`` (the reference), ``llvm`` or ``cuda`` (the Dr.Jit kernel of the
@@ -213,6 +220,9 @@ def make_runner(cal: Calibration, *, peak: str = "centroid", backend: str = "aut
     (:func:`lts360.recon.triangulation.reject.reject_spurious`), before the continuity test;
     ``hidden`` (view → (nθ,) bool, with ``reject``): rows the first-pass profile hides from the
     view, flagged ``HIDDEN`` first (:func:`lts360.recon.triangulation.reject.mark_hidden`).
+    ``multipeak`` (with ``reject``): where a second line along the radius reaches a fifth of
+    the main one, choose the one the section's other rows agree with, or call the row
+    ``SEVERAL_PEAKS`` (:func:`lts360.recon.triangulation.multipeak.choose_peaks`), first.
     """
     if reject:
         from lts360.recon.triangulation.reject import reject_discontinuous
@@ -221,7 +231,8 @@ def make_runner(cal: Calibration, *, peak: str = "centroid", backend: str = "aut
             raise ValueError(f"continuity_k must be > 0, got {continuity_k}")
         inner = make_runner(cal, peak=peak, backend=backend, compensate=compensate)
 
-        return lambda plan: _Rejecting(inner(plan), continuity_k, hidden)
+        return lambda plan: _Rejecting(inner(plan), continuity_k, hidden,
+                                       plan=plan if multipeak else None, compensate=compensate)
     if continuity_k is not None:
         from lts360.recon.triangulation.reject import reject_discontinuous
 
@@ -266,10 +277,10 @@ def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *
                      peak: str = "centroid", compensate: bool = False, backend: str = "auto",
                      method: str = "inverse", progress=None,
                      continuity_k: float | None = None, reject: bool = False,
-                     correct=None) -> Cloud:
+                     correct=None, multipeak: bool = True) -> Cloud:
     """Inverse triangulation of every section with one plan (a band given by the user).
 
-    ``backend``: see :func:`make_runner`.  ``correct``: see :func:`measure_sections_following`.
+    ``backend``, ``multipeak``: see :func:`make_runner`.  ``correct``: see :func:`measure_sections_following`.
     """
     if method == "classic":
         from lts360.recon.triangulation.classic import classic_triangulate, view_regions
@@ -284,7 +295,7 @@ def measure_sections(sections: list[Section], cal: Calibration, grid: CylGrid, *
         raise ValueError(f"method must be 'inverse' or 'classic', got {method!r}")
     plan = plan_inverse(cal, grid, precompute=False)
     measure = make_runner(cal, peak=peak, backend=backend, compensate=compensate,
-                          continuity_k=continuity_k, reject=reject)(plan)
+                          continuity_k=continuity_k, reject=reject, multipeak=multipeak)(plan)
     done, raws = [], []
     items = list(enumerate(sections))
     for k, s in (progress(items) if progress else items):
@@ -445,8 +456,8 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
                                half_width_mm: float | None = None, peak: str = "centroid",
                                compensate: bool = False, backend: str = "auto",
                                progress=None, continuity_k: float | None = None,
-                               reject: bool = False,
-                               correct=None) -> tuple[Cloud, CylGrid, BandLog]:
+                               reject: bool = False, correct=None,
+                               multipeak: bool = True) -> tuple[Cloud, CylGrid, BandLog]:
     """Inverse triangulation with the radial band found from the image.
 
     The first section runs the coarse pass (:class:`lts360.recon.triangulation.band.BandSearch`) and
@@ -457,11 +468,12 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
     first, on a band about the middle of the measurable radii), so that its rows say what was
     searched.
 
-    ``correct``: an optional ``(result, measure, plan) -> result`` applied to each section's
-    result, given the measuring function and plan that made it (a model-based line-centre bias
-    correction, :mod:`lts360.twin`, measures its own synthetic image with the same plan).  If
-    it has ``observe(result, z_mm=, origin_mm=)``, every section is shown to it (in order,
-    ``origin_mm`` the centre it was measured about) before the first is corrected.
+    ``multipeak``: see :func:`make_runner`.  ``correct``: an optional ``(result, measure,
+    plan) -> result`` applied to each section's result, given the measuring function and plan
+    that made it (a model-based line-centre bias correction, :mod:`lts360.twin`, measures its
+    own synthetic image with the same plan).  If it has ``observe(result, z_mm=, origin_mm=)``,
+    every section is shown to it (in order, ``origin_mm`` the centre it was measured about)
+    before the first is corrected.
 
     Returns
     -------
@@ -485,7 +497,7 @@ def measure_sections_following(sections: list[Section], cal: Calibration, *,
     if not w > 0:
         raise ValueError(f"half_width_mm must be > 0, got {half_width_mm}")
     kw = dict(peak=peak, backend=backend, compensate=compensate, continuity_k=continuity_k,
-              reject=reject)
+              reject=reject, multipeak=multipeak)
     t0 = time.perf_counter()
     search = BandSearch(cal, make_runner(cal, peak=peak, backend=backend))
     log = BandLog(coarse=search.describe(), half_width_mm=w, plan_s=time.perf_counter() - t0)

@@ -123,11 +123,16 @@ class PeakResult:
         :class:`Quality` values.
     intensity : (n,) float
         Largest sample of each profile (NaN for an all-NaN profile).
+    second : (n,) float or None
+        Largest sample of the profile's other runs above the threshold (NaN where there is
+        none): with ``intensity`` it says how strong a second line along the radius is
+        (:mod:`lts360.recon.triangulation.multipeak` chooses between them).
     """
 
     r_mm: np.ndarray
     quality: np.ndarray
     intensity: np.ndarray
+    second: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -145,6 +150,8 @@ class MainRun:
     run : (n, nr) bool
         Samples of the main run (all False where there is no peak).
     quality : (n,) uint8
+    second : (n,) float
+        Largest sample of the other runs above the threshold (−inf where there is none).
     """
 
     values: np.ndarray
@@ -152,6 +159,7 @@ class MainRun:
     peak: np.ndarray
     run: np.ndarray
     quality: np.ndarray
+    second: np.ndarray | None = None
 
 
 def _check(profiles, r_mm, *, uniform: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -241,15 +249,18 @@ def main_run(profiles, threshold: float, *, saturation: float | None = None,
     quality[several] = Quality.SEVERAL_PEAKS
     quality[truncated] = Quality.TRUNCATED
     quality[~has] = Quality.NO_PEAK
-    return MainRun(values=vals, imax=imax, peak=peak, run=run, quality=quality)
+    return MainRun(values=vals, imax=imax, peak=peak, run=run, quality=quality,
+                   second=other)
 
 
-def _result(r: np.ndarray, quality: np.ndarray, peak: np.ndarray) -> PeakResult:
+def _result(r: np.ndarray, quality: np.ndarray, peak: np.ndarray,
+            second: np.ndarray) -> PeakResult:
     quality = quality.copy()
     bad = ~np.isfinite(r) & (quality != Quality.TRUNCATED)  # a cut line keeps its reason
     quality[bad] = Quality.NO_PEAK
     r = np.where(quality == Quality.NO_PEAK, np.nan, r)
-    return PeakResult(r_mm=r, quality=quality, intensity=np.where(np.isfinite(peak), peak, np.nan))
+    return PeakResult(r_mm=r, quality=quality, intensity=np.where(np.isfinite(peak), peak, np.nan),
+                      second=np.where(np.isfinite(second), second, np.nan))
 
 
 def centroid(profiles, r_mm, *, threshold: float, saturation: float | None = None,
@@ -281,7 +292,7 @@ def centroid(profiles, r_mm, *, threshold: float, saturation: float | None = Non
     sw = w.sum(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         rc = (w @ r) / sw
-    return _result(rc, mr.quality, mr.peak)
+    return _result(rc, mr.quality, mr.peak, mr.second)
 
 
 def gauss(profiles, r_mm, *, threshold: float, saturation: float | None = None,
@@ -324,7 +335,7 @@ def gauss(profiles, r_mm, *, threshold: float, saturation: float | None = None,
             delta = 0.5 * (ly[:, 0] - ly[:, 2]) / den
         ok &= (den < 0) & (np.abs(delta) <= 1.0)
         rc = np.where(ok, r[i0] + delta * step, np.nan)
-        return _result(rc, mr.quality, mr.peak)
+        return _result(rc, mr.quality, mr.peak, mr.second)
     # Weighted least squares, x in samples from the maximum, scaled by the run's half length.
     run = mr.run & (mr.values > 0)
     count = run.sum(axis=1)
@@ -353,7 +364,7 @@ def gauss(profiles, r_mm, *, threshold: float, saturation: float | None = None,
         xpk = -c[:, 1] / (2.0 * c[:, 2])
     ok &= (c[:, 2] < 0) & (np.abs(xpk) <= 1.0)  # the vertex lies inside the run
     rc = np.where(ok, r[mr.imax] + xpk * half * step, np.nan)
-    return _result(rc, mr.quality, mr.peak)
+    return _result(rc, mr.quality, mr.peak, mr.second)
 
 
 def steger_sigma_mm(line_width_mm: float) -> float:
@@ -458,7 +469,7 @@ def steger(profiles, r_mm, *, threshold: float, saturation: float | None = None,
             ok &= (ya >= 0) & (yb <= 0) & (ya > yb)
             rc = r[ia] + ya / (ya - yb) * step
     rc = np.where(ok, rc, np.nan)
-    return _result(rc, mr.quality, mr.peak)
+    return _result(rc, mr.quality, mr.peak, mr.second)
 
 
 PEAK_DETECTORS = {"centroid": centroid, "gauss": gauss, "steger": steger}
