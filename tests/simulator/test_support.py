@@ -244,15 +244,17 @@ def test_band_frame_and_full_frame_measure_the_same_radius(variant, rig):
     assert abs(a.mean() - b.mean()) < 3 * se + 1e-4
 
 
-def test_cli_renders_the_full_frame_by_default_and_the_support_on_request(variant, tmp_path):
-    """``lts360 render`` renders every pixel; ``--support geometric`` the support; a scan builds
-    its scene once (each section moves the object)."""
+def test_cli_renders_the_support_by_default_and_the_full_frame_on_request(variant, tmp_path):
+    """``lts360 render`` renders the support; ``--support full`` (``--full-frame``) every pixel; with
+    ``--max-scatter`` > 0 the geometric support gives way to the full frame; a scan builds its
+    scene once (each section moves the object)."""
     import json
 
     from lts360.cli import main
 
-    for extra, method in ((["--support", "geometric"], "geometric"), ([], "full")):
-        out = tmp_path / method
+    for extra, method in (([], "geometric"), (["--support", "full"], "full"),
+                          (["--full-frame"], "full"), (["--max-scatter", "1"], "full")):
+        out = tmp_path / "_".join([method] + extra)
         assert main(["render", "--object", "plug-gauge", "--out", str(out), "--scale", "0.125",
                      "--spp", "1", "--sections", "2", "--pitch-mm", "0.5"] + extra) == 0
         truth = json.loads((out / "section_0001" / "frame.json").read_text())
