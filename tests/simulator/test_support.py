@@ -216,6 +216,27 @@ def test_reused_scene_renders_as_a_fresh_one(variant, rig):
     assert cache.loads == 2
 
 
+def test_a_reused_scene_with_ambient_light_renders_as_a_fresh_one(variant, rig):
+    """With ambient light on, a cached scene whose object moved far (its bounding sphere, which
+    the ambient light's sampling uses, moved with it) gives the fresh scene's image bit for bit."""
+    from lts360.simulator.frame import render_frame
+    from lts360.simulator.reuse import SceneCache
+    from lts360.simulator.scene import SceneSpec
+
+    def spec(x_mm):
+        s = _spec(rig, build_object(f"plug-gauge:x={x_mm}"))
+        return SceneSpec(rig, s.meshes, ambient="bright")
+
+    cache = SceneCache()
+    kw = dict(spp=4, seed=3, scale=SCALE, support="full")
+    render_frame(spec(0.0), scenes=cache, **kw)
+    reused, _ = render_frame(spec(6.0), scenes=cache, **kw)
+    fresh, _ = render_frame(spec(6.0), scenes=SceneCache(), **kw)
+    assert (cache.loads, cache.reuses) == (1, 1)
+    np.testing.assert_allclose(reused.radiance_W_m2_sr, fresh.radiance_W_m2_sr, rtol=1e-5,
+                               atol=1e-6 * float(fresh.radiance_W_m2_sr.max()))
+
+
 @pytest.mark.slow
 def test_band_frame_and_full_frame_measure_the_same_radius(variant, rig):
     """The plug gauge at full resolution, 16 spp, noise-free: the band-rendered frame and the
