@@ -194,7 +194,8 @@ def test_a_board_moved_in_a_loaded_scene_renders_as_a_fresh_scene(variant, rig, 
                                                                     mirrors):
     """Build once, render many: the calibration's next board of the same print is moved into
     the scene already loaded (``mi.traverse``), and gives the image a freshly loaded scene gives
-    with the same seed, bit for bit (ambient light included: its bounding sphere follows)."""
+    with the same seed, to float32 rounding (the moved board's transform is derived in the JIT's
+    arithmetic; ambient light included: its bounding sphere follows the board)."""
     from lts360.simulator.calib_render import _render
 
     kw = dict(spp=4, seed=5, thin_lens=True, scale=SCALE, mirrors=mirrors)
@@ -203,7 +204,8 @@ def test_a_board_moved_in_a_loaded_scene_renders_as_a_fresh_scene(variant, rig, 
         _render(rig, shots[names[0]].board, laser_on=laser_on, context=context, **kw)
         moved = _render(rig, shots[names[1]].board, laser_on=laser_on, context=context, **kw)
         fresh = _render(rig, shots[names[1]].board, laser_on=laser_on, context={}, **kw)
-        assert np.array_equal(moved.radiance_W_m2_sr, fresh.radiance_W_m2_sr)
-        assert np.array_equal(moved.laser_W_m2_sr, fresh.laser_W_m2_sr)
+        for a, b in ((moved.radiance_W_m2_sr, fresh.radiance_W_m2_sr),
+                     (moved.laser_W_m2_sr, fresh.laser_W_m2_sr)):
+            np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6 * float(b.max()))
         assert moved.radiance_W_m2_sr.max() > 0
     assert len(context["scenes"]) == 2  # one per laser state, each loaded once
