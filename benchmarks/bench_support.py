@@ -4,7 +4,7 @@ Paper rig, plug gauge, 1280×1024, ``llvm_ad_mono`` by default.  Rows (wall cloc
 the warm calls; the first call, which compiles, apart):
 
 * ``frame_realistic_16``: :func:`simulate_frame` at 16 spp with realistic noise and speckle,
-  the code's default support (``full`` here; the pixel support where that is the default);
+  the default (the pixel support, when the code has one);
 * ``frame_realistic_16_full``: the same with ``support="full"`` (every pixel);
 * ``frame_realistic_16_support``: the same with ``support="geometric"`` (the pixel support);
 * ``frame_noise_free_256``: :func:`simulate_frame` at 256 spp without noise, the default;

@@ -181,7 +181,31 @@ def test_windowed_composite_equals_full_render(variant, rig, shots):
     assert abs(a[inside].mean() - b[inside].mean()) < 5e-3
     assert np.isclose(a.std(), b.std(), rtol=0.05)
     assert np.isclose(full.laser_W_m2_sr.sum(), win.laser_W_m2_sr.sum(), rtol=0.05)
-    # The board-less picture is rendered once and reused.
-    assert len(context) == 1
+    # The board-less picture is rendered once and reused, and so is the loaded scene.
+    pictures = lambda: [k for k in context if k != "scenes"]  # noqa: E731
+    assert len(pictures()) == 1 and len(context["scenes"]) == 1
     again = _render(rig, board, context=context, **kw)
-    assert np.array_equal(again.radiance_W_m2_sr, b) and len(context) == 1
+    assert np.array_equal(again.radiance_W_m2_sr, b) and len(pictures()) == 1
+
+
+@pytest.mark.parametrize("names, mirrors", [(("camera-00", "camera-01"), False),
+                                            (("laser-00", "laser-01"), True)])
+def test_a_board_moved_in_a_loaded_scene_renders_as_a_fresh_scene(variant, rig, shots, names,
+                                                                    mirrors):
+    """Build once, render many: the calibration's next board of the same print is moved into
+    the scene already loaded (``mi.traverse``), and gives the image a freshly loaded scene gives
+    with the same seed, to float32 rounding (the moved board's transform is derived in the JIT's
+    arithmetic; ambient light included: its bounding sphere follows the board)."""
+    from lts360.simulator.calib_render import _render
+
+    kw = dict(spp=4, seed=5, thin_lens=True, scale=SCALE, mirrors=mirrors)
+    context = {}
+    for laser_on in (True, False):
+        _render(rig, shots[names[0]].board, laser_on=laser_on, context=context, **kw)
+        moved = _render(rig, shots[names[1]].board, laser_on=laser_on, context=context, **kw)
+        fresh = _render(rig, shots[names[1]].board, laser_on=laser_on, context={}, **kw)
+        for a, b in ((moved.radiance_W_m2_sr, fresh.radiance_W_m2_sr),
+                     (moved.laser_W_m2_sr, fresh.laser_W_m2_sr)):
+            np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6 * float(b.max()))
+        assert moved.radiance_W_m2_sr.max() > 0
+    assert len(context["scenes"]) == 2  # one per laser state, each loaded once

@@ -216,6 +216,27 @@ def test_reused_scene_renders_as_a_fresh_one(variant, rig):
     assert cache.loads == 2
 
 
+def test_a_reused_scene_with_ambient_light_renders_as_a_fresh_one(variant, rig):
+    """With ambient light on, a cached scene whose object moved far (its bounding sphere, which
+    the ambient light's sampling uses, moved with it) gives the fresh scene's image bit for bit."""
+    from lts360.simulator.frame import render_frame
+    from lts360.simulator.reuse import SceneCache
+    from lts360.simulator.scene import SceneSpec
+
+    def spec(x_mm):
+        s = _spec(rig, build_object(f"plug-gauge:x={x_mm}"))
+        return SceneSpec(rig, s.meshes, ambient="bright")
+
+    cache = SceneCache()
+    kw = dict(spp=4, seed=3, scale=SCALE, support="full")
+    render_frame(spec(0.0), scenes=cache, **kw)
+    reused, _ = render_frame(spec(6.0), scenes=cache, **kw)
+    fresh, _ = render_frame(spec(6.0), scenes=SceneCache(), **kw)
+    assert (cache.loads, cache.reuses) == (1, 1)
+    np.testing.assert_allclose(reused.radiance_W_m2_sr, fresh.radiance_W_m2_sr, rtol=1e-5,
+                               atol=1e-6 * float(fresh.radiance_W_m2_sr.max()))
+
+
 @pytest.mark.slow
 def test_band_frame_and_full_frame_measure_the_same_radius(variant, rig):
     """The plug gauge at full resolution, 16 spp, noise-free: the band-rendered frame and the
@@ -244,15 +265,17 @@ def test_band_frame_and_full_frame_measure_the_same_radius(variant, rig):
     assert abs(a.mean() - b.mean()) < 3 * se + 1e-4
 
 
-def test_cli_renders_the_full_frame_by_default_and_the_support_on_request(variant, tmp_path):
-    """``lts360 render`` renders every pixel; ``--support geometric`` the support; a scan builds
-    its scene once (each section moves the object)."""
+def test_cli_renders_the_support_by_default_and_the_full_frame_on_request(variant, tmp_path):
+    """``lts360 render`` renders the support; ``--support full`` (``--full-frame``) every pixel; with
+    ``--max-scatter`` > 0 the geometric support gives way to the full frame; a scan builds its
+    scene once (each section moves the object)."""
     import json
 
     from lts360.cli import main
 
-    for extra, method in ((["--support", "geometric"], "geometric"), ([], "full")):
-        out = tmp_path / method
+    for extra, method in (([], "geometric"), (["--support", "full"], "full"),
+                          (["--full-frame"], "full"), (["--max-scatter", "1"], "full")):
+        out = tmp_path / "_".join([method] + extra)
         assert main(["render", "--object", "plug-gauge", "--out", str(out), "--scale", "0.125",
                      "--spp", "1", "--sections", "2", "--pitch-mm", "0.5"] + extra) == 0
         truth = json.loads((out / "section_0001" / "frame.json").read_text())

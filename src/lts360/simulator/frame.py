@@ -63,7 +63,7 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
                    thin_lens: bool = True, exposure_time_s: float | None = None,
                    speckle_seed: int | None = None, background_z_mm: float | None = None,
                    exposure_fraction: float = 0.8, extra_meshes: tuple = (),
-                   pixels_xy: np.ndarray | None = None, support: str = "full",
+                   pixels_xy: np.ndarray | None = None, support: str = "geometric",
                    scenes=None, max_scatter: int = 0) -> Frame:
     """Render one frame of ``obj`` in ``rig`` at stage height ``z_mm``.
 
@@ -92,16 +92,14 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
         Overrides ``support``.
     support : {"geometric", "pilot", "full"}
         Which pixels are rendered at ``spp`` (:mod:`lts360.simulator.support`).
-        ``full`` (default): every pixel.  ``geometric`` (``full`` when ``max_scatter`` > 0,
-        since interreflected light lies off the geometric stripe): every pixel that can hold
-        direct laser light, from the scene's
-        geometry (the sheet's slab on every shape, seen through every view, widened by the
-        defocus blur); ``pilot``: the pixels a low-spp full render of the same integrator
-        lights (for light the geometry does not bound, e.g. interreflections).  A support
-        frame is another realisation of the full frame's render noise, with its statistics and
-        the same speckle; it is not yet the default because tests pinned on one full-frame
-        realisation (a study's claims) are not yet measured again on it (docs/simulator.md).
-        Outside the
+        ``geometric`` (default): every pixel that can hold direct laser light, from the
+        scene's geometry (the sheet's slab on every shape, seen through every view, widened
+        by the defocus blur); ``full`` when ``max_scatter`` > 0 (interreflected light lies
+        off the geometric stripe) or the laser is off.  ``pilot``: the pixels a low-spp full
+        render of the same integrator lights (for light the geometry does not bound, e.g.
+        interreflections).  ``full``: every pixel.  A support frame is another realisation
+        of the full frame's render noise with the same statistics and the same speckle
+        (docs/simulator.md).  Outside the
         support a pixel holds no laser light: with ambient light off it gets none, with it on
         the ambient radiance of one full-frame ambient-only render at :data:`AMBIENT_SPP`.
         ``truth["render"]["support"]`` records the method and the pixel count.
@@ -148,7 +146,7 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
 
 def render_frame(spec: SceneSpec, *, spp: int, seed: int, scale: float = 1.0, max_bounces: int = 2,
                  thin_lens: bool = True, laser_on: bool = True, pixels_xy=None,
-                 support: str = "full", scenes=None, max_scatter: int = 0
+                 support: str = "geometric", scenes=None, max_scatter: int = 0
                  ) -> tuple[RenderResult, PixelSupport]:
     """The radiance of a frame, rendered on its pixel support (``simulate_frame``'s render).
 

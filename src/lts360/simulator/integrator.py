@@ -386,6 +386,7 @@ def _to_surface(s: _Setup, scene, sampler, ray, active, beta, env=None):
     ctx = mi.BSDFContext()
     L = mi.Spectrum(0.0)
     found = mi.Bool(False)
+    si_found = None
     for depth in range(s.max_bounces + 1):
         si = scene.ray_intersect(ray, active)
         valid = active & si.is_valid()
@@ -395,7 +396,10 @@ def _to_surface(s: _Setup, scene, sampler, ray, active, beta, env=None):
             break
         bsdf = si.bsdf(ray)
         is_mirror = valid & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta)
-        found = found | (valid & _not(is_mirror))
+        hit = valid & _not(is_mirror)
+        if not s.scalar:  # the surface met, kept (the shading needs no second intersection)
+            si_found = si if si_found is None else dr.select(hit, si, si_found)
+        found = found | hit
         if depth == s.max_bounces:
             break
         bs, w = bsdf.sample(ctx, si, sampler.next_1d(is_mirror), sampler.next_2d(is_mirror),
@@ -408,7 +412,7 @@ def _to_surface(s: _Setup, scene, sampler, ray, active, beta, env=None):
         ray = dr.select(is_mirror, mi.Ray3f(si.p + wo * MIRROR_STEP_MM, wo, si.time,
                                             si.wavelengths), ray)
         active = is_mirror & (bs.pdf > 0)
-    return ray, found, beta, L
+    return ray, found, beta, L, si_found
 
 
 def _sample(s: _Setup, scene, sampler, ray, active):
@@ -420,13 +424,14 @@ def _sample(s: _Setup, scene, sampler, ray, active):
     #    non-delta surface (escaped rays see the ambient environment).
     ctx = mi.BSDFContext()
     env = scene.environment() if s.ambient else None
-    ray, found, throughput, L = _to_surface(s, scene, sampler, mi.Ray3f(ray), mi.Bool(active),
-                                            mi.Spectrum(1.0), env)
+    ray, found, throughput, L, si = _to_surface(s, scene, sampler, mi.Ray3f(ray),
+                                                mi.Bool(active), mi.Spectrum(1.0), env)
     # 2. Shade once at that surface: the laser through every mirror sequence (method of
     #    images) and the ambient light by emitter sampling.
     if s.scalar and not found:
         return L, mi.Bool(True), [mi.Float(0.0)]
-    si = scene.ray_intersect(ray, found)
+    if si is None:  # a scalar variant: intersect again
+        si = scene.ray_intersect(ray, found)
     found = found & si.is_valid()
     bsdf = si.bsdf(ray)
     L_laser = throughput * _laser(s, scene, si, bsdf, found)
@@ -460,7 +465,7 @@ def _scatter(s: _Setup, scene, sampler, si, bsdf, throughput, active):
         active = active & (bs.pdf > 0)
         ray = si.spawn_ray(si.to_world(bs.wo))
         # Through up to K mirrors to the next non-delta point (as the camera ray).
-        ray, found, beta, _ = _to_surface(s, scene, sampler, ray, active, beta)
+        ray, found, beta, _, _ = _to_surface(s, scene, sampler, ray, active, beta)
         if s.scalar and not found:
             break
         si = scene.ray_intersect(ray, found)

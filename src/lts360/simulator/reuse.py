@@ -6,7 +6,8 @@ the PLY export and load, the acceleration structure and the integrator's set-up;
 compiles the render kernel for each new scene (its structure is part of the kernel's key).
 :class:`SceneCache` keeps the loaded scenes of one loop and, for a frame whose shapes have the
 same triangles (same faces, the vertices moved), writes the new vertex positions through
-``mi.traverse`` and ``params.update()`` instead of loading anew.  The render of a pixel list
+``mi.traverse`` and ``params.update()`` instead of loading anew (and hands the scene's new
+bounds to the ambient light, whose sampling uses them: a stale sphere changed the image).  The render of a pixel list
 (:func:`lts360.simulator.render.render_pixels`) takes its pixels as kernel data, so the same
 compiled kernel serves every frame of the loop.
 
@@ -120,6 +121,9 @@ class SceneCache:
                 params[f"{name}.vertex_positions"] = mi.Float(
                     np.asarray(mesh.vertices, np.float32).ravel())
             params.update()
+            env = prepared[0].environment()
+            if env is not None:  # the ambient light's bounding sphere follows the moved shapes
+                env.set_scene(prepared[0])
             self.reuses += 1
         self._scenes[key] = prepared
         while len(self._scenes) > self.max_scenes:
