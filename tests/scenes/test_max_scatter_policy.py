@@ -48,6 +48,12 @@ def test_the_examples_trials_take_auto_per_object(tmp_path):
                                                                 max_scatter=0))
     assert {p["max_scatter"] for p in examples_params(tmp_path, objects=objs, max_scatter="2")} \
         == {2}
+    # a mixed study (the default objects: matte and shiny): one schema, as the runner demands
+    params = examples_params(tmp_path)
+    assert len({tuple(sorted(p)) for p in params}) == 1
+    from lts360.experiments.runner import _check_trials, plan_trials
+
+    assert len(_check_trials(plan_trials(params, 0))) == len(params)
 
 
 def test_stored_frames_are_read_back_for_the_same_scan(tmp_path):

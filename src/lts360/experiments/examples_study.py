@@ -225,7 +225,7 @@ def examples_params(out: Path, *, objects=None, noise: str = "realistic", spp: i
     from lts360.scenes.objects import build_object
 
     names = list(objects or PAPER_EXAMPLES)
-    params = []
+    params, bounces = [], []
     for name in names:
         known = PAPER_EXAMPLES | EXTRA_EXAMPLES
         if name not in known:
@@ -237,10 +237,11 @@ def examples_params(out: Path, *, objects=None, noise: str = "realistic", spp: i
                        "calibration": "" if calibration is None else str(Path(calibration).resolve()),
                        "theta_step_deg": theta_step_deg, "r_step_mm": r_step_mm,
                        "out": str(Path(out).resolve())})
-        ms = resolve_max_scatter(max_scatter, build_object(name).material
-                                 if max_scatter == "auto" else None)
-        if ms:  # only then: the trials of earlier studies keep their parameters
-            params[-1]["max_scatter"] = ms
+        bounces.append(resolve_max_scatter(max_scatter, build_object(name).material
+                                           if max_scatter == "auto" else None))
+    if any(bounces):  # only then: the trials of earlier studies keep their parameters
+        for p, ms in zip(params, bounces):  # every trial names it (the runner's one schema)
+            p["max_scatter"] = ms
     return params
 
 
