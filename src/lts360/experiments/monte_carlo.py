@@ -49,10 +49,34 @@ noise — while drawn ones were compensated on the noise-free reference placemen
 calibration-only run's mean sat 9 µm from the others'.  That gap is one compensation's own
 noise: the ``compensation`` input.
 
-With ``master`` (``--master``) every compensation, nominal and drawn, is mastered with the
-gauge's known diameter (:func:`~lts360.recon.calibration.compensation.master_fit`: per view a
-radial offset too), so a drawn calibration's size error is absorbed.  The twin is not part of
-the trials.
+The study measures as a user of the rig would, as the plug-gauge study does, each step
+switchable:
+
+- ``master`` (default on; ``--no-master``: §4.4 alone, the paper's method): every
+  compensation, nominal and drawn, is mastered with the gauge's known diameter
+  (:func:`~lts360.recon.calibration.compensation.master_fit`: per view a radial offset too),
+  so a drawn calibration's size error is absorbed;
+- ``bias_model="twin"`` (default; ``--bias-model none``): every trial's section is corrected
+  by its twin (:func:`lts360.twin.twin_corrected`, the code path of the plug-gauge study's
+  :func:`~lts360.experiments.gauge_study.measure_gauge_image`), and a mastered compensation's
+  reference shots too (:func:`lts360.twin.twin_corrected_raw`, as ``lts360 compensate``).
+
+The twin is rendered anew for every trial, with that trial's calibration and from that
+trial's measured section, not computed once per placement and reused.  Reuse would be nearly
+right — the line-centre bias depends on the geometry and the calibration, hardly on the noise
+draw — but each drawn calibration has its own twin (its own camera and mirrors), and a twin
+made from the noise-free section would not be the correction a user gets, whose twin is
+shaped and exposed from the noisy image.  Measured, 2026-12-04, under load on two cores: a
+trial (drawn calibration, its mastered compensation, the measurement) 0.5–0.7 s, the twin's
+correction of the section 0.8–1.2 s more, and as much again for the master's reference shot
+of a drawn calibration: the whole Monte Carlo about 4× slower, which fits.
+
+With ``steps`` (default on) each trial of the full Monte Carlo also measures its image with
+the other configurations of :data:`MC_STEPS` on the same draw (the same image, drawn
+calibration and reference image): the summary's ``steps`` give the paper's method beside ours
+and u(y) with and without the master.  The trial's own measurement before the twin's
+correction is recorded too (``y_no_twin_um``; its master's shots stay twin-corrected).  The
+one-at-a-time runs measure only the configuration.
 
 Sensitivity: "one at a time" runs where only one input varies (the others at their nominal
 value: the estimated calibration, no noise, no speckle, the first placement, ΔT = 0) give each
