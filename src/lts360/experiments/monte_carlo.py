@@ -66,10 +66,12 @@ trial's measured section, not computed once per placement and reused.  Reuse wou
 right — the line-centre bias depends on the geometry and the calibration, hardly on the noise
 draw — but each drawn calibration has its own twin (its own camera and mirrors), and a twin
 made from the noise-free section would not be the correction a user gets, whose twin is
-shaped and exposed from the noisy image.  Measured, 2026-12-04, under load on two cores: a
-trial (drawn calibration, its mastered compensation, the measurement) 0.5–0.7 s, the twin's
-correction of the section 0.8–1.2 s more, and as much again for the master's reference shot
-of a drawn calibration: the whole Monte Carlo about 4× slower, which fits.
+shaped and exposed from the noisy image.  And the cost fits (measured 2026-12-04 on the two
+cores while other work shared them): a trial with a drawn calibration, its mastered
+compensation and the measurement 0.45–0.67 s, the twin's correction of one section
+0.75–1.17 s more; a default trial corrects two sections (its own and the master's reference
+shot) and, with ``steps``, measures two more configurations: 100 such trials took 4 min on two
+worker processes (STUDIES.md, "Monte Carlo uncertainty").
 
 With ``steps`` (default on) each trial of the full Monte Carlo also measures its image with
 the other configurations of :data:`MC_STEPS` on the same draw (the same image, drawn
