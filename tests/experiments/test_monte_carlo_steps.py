@@ -43,8 +43,9 @@ def test_the_monte_carlo_twin_needs_the_calibrations_optics(tmp_path, truth_cali
     old = tmp_path / "old.json"
     save_calibration(old, dataclasses.replace(load_calibration(truth_calibration), optics={}))
     with pytest.raises(ValueError, match="records no optics"):
-        run_monte_carlo_study(tmp_path, calibration=old, placements=1, say=lambda *_: None,
-                              spp=1)
+        run_monte_carlo_study(tmp_path / "mc", calibration=old, placements=1,
+                              say=lambda *_: None, spp=1)
+    assert not (tmp_path / "mc" / "renders").exists()  # refused before any render
 
 
 def test_a_twin_corrected_trial_differs_from_the_plain_one_by_the_twins_correction(

@@ -521,6 +521,11 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
     out.mkdir(parents=True, exist_ok=True)
     if not 0 <= placement_mm <= 10:
         raise ValueError(f"placement_mm must be in [0, 10], got {placement_mm}")
+    if bias_model == "twin":  # refused in one line, before any render, without its optics
+        from lts360.recon.model import load_calibration
+        from lts360.twin.rig import twin_design
+
+        twin_design(load_calibration(calibration))
     renders = _render_placements(out, placements, rig=rig, seed=seed, spp=spp, say=say,
                                  placement_mm=float(placement_mm))
     base = {"calibration": str(Path(calibration).resolve()), "renders": str(renders.resolve()),
@@ -531,10 +536,6 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
     if master and compensate:
         base["master"] = True
     if bias_model == "twin":
-        from lts360.recon.model import load_calibration
-        from lts360.twin.rig import twin_design
-
-        twin_design(load_calibration(calibration))  # one line if it records no optics
         base["bias_model"] = "twin"
     if workers is None and dask_address is None:
         workers = 2
