@@ -92,6 +92,8 @@ def _add_user_steps(q) -> None:
 
 def _add_monte_carlo(studies) -> None:
     """``study monte-carlo``."""
+    import argparse
+
     q = _study_parser(studies, "monte-carlo",
                       "GUM Supplement 1 Monte Carlo of the gauge radius, GUM "
                       "budget, sensitivity ranking, speckle limit")
@@ -105,9 +107,17 @@ def _add_monte_carlo(studies) -> None:
     q.add_argument("--sensitivity-trials", type=int, default=50,
                    help="trials per input in the one-at-a-time runs")
     q.add_argument("--placements", type=int, default=8, help="rendered gauge placements")
-    q.add_argument("--no-compensate", action="store_true", help="no §4.4 compensation")
-    q.add_argument("--master", action="store_true",
-                   help="every compensation mastered with the gauge's known diameter")
+    q.add_argument("--no-compensate", action="store_true",
+                   help="no §4.4 compensation (and so no master)")
+    q.add_argument("--master", action=argparse.BooleanOptionalAction, default=None,
+                   help="every compensation mastered with the gauge's known diameter (default "
+                   "on; --no-master: §4.4 alone, the paper's method)")
+    q.add_argument("--bias-model", choices=("none", "twin"), default="twin",
+                   help="twin (default): every trial's section (and the master's reference "
+                   "shots) corrected by its twin; none: no line-centre bias correction")
+    q.add_argument("--no-steps", dest="steps", action="store_false",
+                   help="measure each draw only as configured (default: also with §4.4 alone "
+                   "and §4.4 + master, for the table of steps)")
     q.add_argument("--compensation-shots", type=int, default=1, metavar="K",
                    help="images of the reference placement each §4.4 compensation is fitted "
                    "to (default 1, as the paper)")

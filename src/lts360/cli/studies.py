@@ -95,6 +95,7 @@ def cmd_study_monte_carlo(args) -> int:
     _check_placement(args.placement_mm)
     if args.master and args.no_compensate:
         raise UsageError("--master: the mastering is a compensation; drop --no-compensate")
+    master = args.master is not False and not args.no_compensate
     _optional_file(args.calibration, "--calibration")
     _study_rig(args.rig)
     _set_variant(args.variant)
@@ -106,8 +107,9 @@ def cmd_study_monte_carlo(args) -> int:
     summary = run_monte_carlo_study(out, calibration=cal, trials=args.trials, rig=args.rig,
                                     compensate=not args.no_compensate,
                                     compensation_shots=args.compensation_shots,
-                                    master=args.master,
-                                    adaptive=args.adaptive, batch=args.batch, n_dig=args.digits,
+                                    master=master, bias_model=args.bias_model,
+                                    steps=args.steps, adaptive=args.adaptive,
+                                    batch=args.batch, n_dig=args.digits,
                                     sensitivity_trials=args.sensitivity_trials,
                                     placements=args.placements, placement_mm=args.placement_mm,
                                     workers=args.workers, **common)

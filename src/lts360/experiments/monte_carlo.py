@@ -49,10 +49,36 @@ noise — while drawn ones were compensated on the noise-free reference placemen
 calibration-only run's mean sat 9 µm from the others'.  That gap is one compensation's own
 noise: the ``compensation`` input.
 
-With ``master`` (``--master``) every compensation, nominal and drawn, is mastered with the
-gauge's known diameter (:func:`~lts360.recon.calibration.compensation.master_fit`: per view a
-radial offset too), so a drawn calibration's size error is absorbed.  The twin is not part of
-the trials.
+The study measures as a user of the rig would, as the plug-gauge study does, each step
+switchable:
+
+- ``master`` (default on; ``--no-master``: §4.4 alone, the paper's method): every
+  compensation, nominal and drawn, is mastered with the gauge's known diameter
+  (:func:`~lts360.recon.calibration.compensation.master_fit`: per view a radial offset too),
+  so a drawn calibration's size error is absorbed;
+- ``bias_model="twin"`` (default; ``--bias-model none``): every trial's section is corrected
+  by its twin (:func:`lts360.twin.twin_corrected`, the code path of the plug-gauge study's
+  :func:`~lts360.experiments.gauge_study.measure_gauge_image`), and a mastered compensation's
+  reference shots too (:func:`lts360.twin.twin_corrected_raw`, as ``lts360 compensate``).
+
+The twin is rendered anew for every trial, with that trial's calibration and from that
+trial's measured section, not computed once per placement and reused.  Reuse would be nearly
+right — the line-centre bias depends on the geometry and the calibration, hardly on the noise
+draw — but each drawn calibration has its own twin (its own camera and mirrors), and a twin
+made from the noise-free section would not be the correction a user gets, whose twin is
+shaped and exposed from the noisy image.  And the cost fits (measured 2026-12-04 on the two
+cores while other work shared them): a trial with a drawn calibration, its mastered
+compensation and the measurement 0.45–0.67 s, the twin's correction of one section
+0.75–1.17 s more; a default trial corrects two sections (its own and the master's reference
+shot) and, with ``steps``, measures two more configurations: 100 such trials took 4 min on two
+worker processes (STUDIES.md, "Monte Carlo uncertainty").
+
+With ``steps`` (default on) each trial of the full Monte Carlo also measures its image with
+the other configurations of :data:`MC_STEPS` on the same draw (the same image, drawn
+calibration and reference image): the summary's ``steps`` give the paper's method beside ours
+and u(y) with and without the master.  The trial's own measurement before the twin's
+correction is recorded too (``y_no_twin_um``; its master's shots stay twin-corrected).  The
+one-at-a-time runs measure only the configuration.
 
 Sensitivity: "one at a time" runs where only one input varies (the others at their nominal
 value: the estimated calibration, no noise, no speckle, the first placement, ΔT = 0) give each
@@ -77,16 +103,25 @@ from lts360.experiments.gauge_study import (
     DELTA_T_K,
     GAUGE_DIAMETER_MM,
     STEEL_ALPHA_PER_K,
+    STEPS,
+    _config_label,
+    _step_key,
     gauge_placements,
 )
 from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study
 from lts360.folders import is_frame, read_frame_meta
 
-__all__ = ["INPUTS", "mc_trial", "run_monte_carlo_study", "coverage_interval",
+__all__ = ["INPUTS", "MC_STEPS", "mc_trial", "run_monte_carlo_study", "coverage_interval",
            "adaptive_stable", "dorsch_speckle_limit_um", "speckle_point_prediction_um",
            "format_mc"]
 
 INPUTS = ("calibration", "compensation", "sensor_noise", "speckle", "placement", "temperature")
+#: The configurations of the gauge study's :data:`~lts360.experiments.gauge_study.STEPS` each
+#: trial of the full Monte Carlo also measures its image with (``steps``; the same draw: image,
+#: calibration, reference image): the paper's method, the master, the master and the twin.
+#: §4.4 + twin without the master is left out (one more twin render per trial): ``--no-master``
+#: measures it as the study's configuration.
+MC_STEPS = tuple(s for s in STEPS if s[0] in ("c44", "c44_master", "c44_master_twin"))
 
 
 def coverage_interval(y: np.ndarray, p: float = 0.95) -> tuple[float, float]:
@@ -176,14 +211,17 @@ def _calibration(path: str):
 
 def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
                 noise_seed: int | None = None, shots: int = 1,
-                placement_mm: float = DEFAULT_PLACEMENT_MM, master: bool = False):
+                placement_mm: float = DEFAULT_PLACEMENT_MM, master: bool = False,
+                bias_model: str = "none"):
     """``cal`` with the §4.4 view offsets measured with it on the reference placement
     (``placement_00``), whatever offsets ``cal`` held.  The reference image is noise-free, or
     with ``noise_seed`` has realistic sensor noise and a speckle pattern drawn from it; then
     ``shots`` such images (the gauge turned between them: a new speckle pattern each) are
     fitted jointly.  ``master``: the fit knows the gauge's diameter
     (:func:`~lts360.recon.calibration.compensation.master_fit`: per view a radial offset
-    too)."""
+    too); with ``bias_model="twin"`` its shots are corrected by their twin first
+    (:func:`~lts360.twin.twin_corrected_raw`, as the plug-gauge study and ``lts360
+    compensate`` do: the master then sets what the twin leaves)."""
     from types import SimpleNamespace
 
     from lts360.recon.calibration.compensation import joint_view_offsets
@@ -206,6 +244,11 @@ def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
     if master:
         from lts360.recon.calibration.compensation import master_fit
 
+        if bias_model == "twin":
+            from lts360.twin import twin_corrected_raw
+
+            grid = _grid(theta_step_deg, placement_mm)
+            results = [twin_corrected_raw(r, cal, grid, _twin(cal)) for r in results]
         fit = master_fit(results, GAUGE_DIAMETER_MM)
         return dataclasses.replace(cal, view_offsets_mm=fit.offsets_mm,
                                    view_radial_offsets_mm=fit.radial_offset_mm,
@@ -214,12 +257,23 @@ def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
     return dataclasses.replace(cal, view_offsets_mm=offsets)
 
 
-@functools.lru_cache(maxsize=2)
+def _twin(cal):
+    """The twin of a measurement with ``cal`` (its optics: the rig ``cal`` records, refused in
+    one line without a record), as the plug-gauge study makes it: no input sensitivity."""
+    from lts360.twin import TwinCorrector
+    from lts360.twin.rig import twin_design
+
+    return TwinCorrector(cal, twin_design(cal), input_u=None)
+
+
+@functools.lru_cache(maxsize=8)
 def _nominal_calibration(path: str, renders: str, rig_name: str, theta_step_deg: float,
-                         placement_mm: float = DEFAULT_PLACEMENT_MM, master: bool = False):
+                         placement_mm: float = DEFAULT_PLACEMENT_MM, master: bool = False,
+                         bias_model: str = "none"):
     """The file's calibration compensated at the reference placement (once per process)."""
     return _compensate(_calibration(path), renders, rig_name, theta_step_deg,
-                       placement_mm=placement_mm, master=master)
+                       placement_mm=placement_mm, master=master,
+                       bias_model=bias_model if master else "none")
 
 
 def _uncompensated(path: str):
@@ -252,8 +306,10 @@ def _offset_mm(frame_dir: str) -> float:
 @functools.lru_cache(maxsize=16)
 def _nominal_radii(frame_dir: str, cal_path: str, renders: str, rig_name: str,
                    theta_step_deg: float, compensate: bool = True,
-                   placement_mm: float = DEFAULT_PLACEMENT_MM, master: bool = False) -> dict:
-    """Per-view radii of a placement without noise or speckle (the speckle run's reference)."""
+                   placement_mm: float = DEFAULT_PLACEMENT_MM, master: bool = False,
+                   bias_model: str = "none") -> dict:
+    """Per-view radii of a placement without noise or speckle (the speckle run's reference;
+    before any twin correction, as the speckle run's own radii)."""
     from types import SimpleNamespace
 
     from lts360.recon.triangulation.inverse import inverse_triangulate
@@ -264,20 +320,79 @@ def _nominal_radii(frame_dir: str, cal_path: str, renders: str, rig_name: str,
     img, _, _ = sensor_image(load_rig(rig_name), SimpleNamespace(radiance_W_m2_sr=Y,
                                                                   laser_W_m2_sr=L), noise="none")
     cal = (_nominal_calibration(cal_path, renders, rig_name, theta_step_deg, placement_mm,
-                                master) if compensate else _uncompensated(cal_path))
+                                master, bias_model) if compensate else _uncompensated(cal_path))
     res = inverse_triangulate(img, cal, _grid(theta_step_deg, placement_mm),
                               compensate=compensate)
     return {n: v.r_mm for n, v in res.views.items()}
 
 
+def _trial_calibration(p: dict, vary: set, seeds, *, compensate: bool, master: bool,
+                       bias_model: str):
+    """The calibration a trial measures with: drawn or nominal, compensated as configured."""
+    from lts360.recon.calibration.uncertainty import sample_calibration
+
+    pl_mm = float(p.get("placement_mm", DEFAULT_PLACEMENT_MM))
+    step = float(p["theta_step_deg"])
+    if not compensate:  # measured without the §4.4 compensation
+        cal = _uncompensated(p["calibration"])
+        if "calibration" in vary:
+            cal = sample_calibration(cal, np.random.default_rng(seeds[2]))
+        return cal
+    if vary & {"calibration", "compensation"}:
+        # A new calibration is followed by a new §4.4 compensation, as in the lab: measure
+        # the gauge at the reference placement with it and put the views on one circle.
+        cal = _calibration(p["calibration"])
+        if "calibration" in vary:
+            cal = sample_calibration(cal, np.random.default_rng(seeds[2]))
+        return _compensate(cal, p["renders"], p["rig"], step,
+                           noise_seed=int(seeds[4]) if "compensation" in vary else None,
+                           shots=int(p.get("compensation_shots", 1)), placement_mm=pl_mm,
+                           master=master, bias_model=bias_model if master else "none")
+    return _nominal_calibration(p["calibration"], p["renders"], p["rig"], step, pl_mm, master,
+                                bias_model if master else "none")  # the same procedure, once
+
+
+def _radius_error_um(result, dT: float) -> tuple[float, float, int]:
+    """Y (µm) of a measured section — circle fit of every view's valid points, minus the
+    nominal radius, plus the gauge's thermal growth — its point scatter (µm) and points."""
+    from lts360.geometry.fit import fit_circle
+
+    pts = np.concatenate([v.points_meas_mm[v.valid, :2] for v in result.views.values()])
+    if len(pts) < 10:
+        return np.nan, np.nan, int(len(pts))
+    r0 = GAUGE_DIAMETER_MM / 2.0
+    fit = fit_circle(pts)
+    r = np.hypot(*(pts - fit.center_mm).T)
+    y = (fit.radius_mm - r0) * 1e3 + STEEL_ALPHA_PER_K * r0 * dT * 1e3
+    return float(y), float(r.std() * 1e3), int(len(pts))
+
+
+def _measure(image, cal, grid, bias_model: str):
+    """The section in ``image`` measured with ``cal`` (compensated if it holds offsets), and
+    with ``bias_model="twin"`` corrected by its twin; also the uncorrected measurement and the
+    mean bias the twin removed over the corrected points (µm; NaN without the twin)."""
+    from lts360.recon.triangulation.inverse import inverse_triangulate
+
+    comp = bool(cal.view_offsets_mm)
+    plain = inverse_triangulate(image, cal, grid, compensate=comp)
+    if bias_model == "none":
+        return plain, plain, np.nan
+    from lts360.twin import twin_corrected
+
+    twin = _twin(cal)
+    fixed = twin_corrected(plain, cal, grid, twin, compensate=comp)
+    views = twin.log.sections[-1]["views"].values()
+    b = np.concatenate([v["bias_mm"] for v in views]) if views else np.zeros(0)
+    return fixed, plain, float(1e3 * b.mean()) if b.size else np.nan
+
+
 def mc_trial(trial: Trial) -> TrialOutput:
     """One Monte Carlo draw (see the module docstring); ``params['vary']`` names the inputs
-    that vary (``all`` or one of :data:`INPUTS`)."""
+    that vary (``all`` or one of :data:`INPUTS`).  ``params``: ``compensate``, ``master``,
+    ``bias_model`` (the configuration measured; defaults: §4.4 alone, as earlier studies) and
+    ``steps`` (also each of :data:`MC_STEPS` on the same draw: ``y_<key>_um``)."""
     from types import SimpleNamespace
 
-    from lts360.geometry.fit import fit_circle
-    from lts360.recon.calibration.uncertainty import sample_calibration
-    from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import sensor_image
 
@@ -286,56 +401,47 @@ def mc_trial(trial: Trial) -> TrialOutput:
     vary = set(INPUTS) if p["vary"] == "all" else {p["vary"]}
     rng = np.random.default_rng(trial.seed)
     seeds = rng.integers(0, 2**31, size=5)
-    n_pl = int(p["placements"])
-    k = int(rng.integers(n_pl)) if "placement" in vary else 0
-    Y, L, meta = _placement(str(Path(p["renders"]) / f"placement_{k:02d}"))
-    rig = load_rig(p["rig"])
+    k = int(rng.integers(int(p["placements"]))) if "placement" in vary else 0
+    frame_dir = str(Path(p["renders"]) / f"placement_{k:02d}")
+    Y, L, meta = _placement(frame_dir)
     res = SimpleNamespace(radiance_W_m2_sr=Y, laser_W_m2_sr=L)
-    image, _, _ = sensor_image(rig, res, noise="realistic" if "sensor_noise" in vary else "none",
+    image, _, _ = sensor_image(load_rig(p["rig"]), res,
+                               noise="realistic" if "sensor_noise" in vary else "none",
                                seed=int(seeds[0]), speckle="speckle" in vary,
                                speckle_seed=int(seeds[1]))
-    r0 = GAUGE_DIAMETER_MM / 2.0
     step = float(p["theta_step_deg"])
-    master = bool(p.get("master", False))
-    if not p.get("compensate", True):  # measured without the §4.4 compensation
-        cal = _uncompensated(p["calibration"])
-        if "calibration" in vary:
-            cal = sample_calibration(cal, np.random.default_rng(seeds[2]))
-    elif vary & {"calibration", "compensation"}:
-        # A new calibration is followed by a new §4.4 compensation, as in the lab: measure
-        # the gauge at the reference placement with it and put the views on one circle.
-        cal = _calibration(p["calibration"])
-        if "calibration" in vary:
-            cal = sample_calibration(cal, np.random.default_rng(seeds[2]))
-        cal = _compensate(cal, p["renders"], p["rig"], step,
-                          noise_seed=int(seeds[4]) if "compensation" in vary else None,
-                          shots=int(p.get("compensation_shots", 1)), placement_mm=pl_mm,
-                          master=master)
-    else:  # the same procedure, once
-        cal = _nominal_calibration(p["calibration"], p["renders"], p["rig"], step, pl_mm,
-                                   master)
+    compensate = bool(p.get("compensate", True))
+    master = bool(p.get("master", False)) and compensate
+    bias_model = p.get("bias_model", "none")
+    if bias_model not in ("none", "twin"):
+        raise ValueError(f"bias_model must be none or twin, got {bias_model!r}")
     grid = _grid(step, pl_mm)
-    out = inverse_triangulate(image, cal, grid, compensate=bool(cal.view_offsets_mm))
-    offset = _offset_mm(str(Path(p["renders"]) / f"placement_{k:02d}"))
-    extra = {}
-    if p["vary"] == "speckle":  # per-point scatter caused by speckle alone (vs. no speckle)
-        nominal = _nominal_radii(str(Path(p["renders"]) / f"placement_{k:02d}"), p["calibration"],
-                                 p["renders"], p["rig"], step, bool(p.get("compensate", True)),
-                                 pl_mm, master)
-        diffs = np.concatenate([out.views[n].r_mm - nominal[n] for n in out.views])
-        extra["speckle_point_std_um"] = float(np.nanstd(diffs) * 1e3)
-    pts = np.concatenate([v.points_meas_mm[v.valid, :2] for v in out.views.values()])
+    cal = _trial_calibration(p, vary, seeds, compensate=compensate, master=master,
+                             bias_model=bias_model)
+    out, plain, twin_bias = _measure(image, cal, grid, bias_model)
+    offset = _offset_mm(frame_dir)
     dT = float(np.random.default_rng(seeds[3]).uniform(-DELTA_T_K, DELTA_T_K)) \
         if "temperature" in vary else 0.0
-    if len(pts) < 10:
-        return TrialOutput(values={"y_um": np.nan, "point_std_um": np.nan, "n_points": 0,
-                                   "placement": k, "delta_T_K": dT, "offset_mm": offset})
-    fit = fit_circle(pts)
-    r = np.hypot(*(pts - fit.center_mm).T)
-    y = (fit.radius_mm - r0) * 1e3 + STEEL_ALPHA_PER_K * r0 * dT * 1e3
-    return TrialOutput(values={"y_um": float(y), "point_std_um": float(r.std() * 1e3),
-                               "n_points": int(len(pts)), "placement": k, "delta_T_K": dT,
-                               "offset_mm": offset, **extra})
+    y, point_std, n = _radius_error_um(out, dT)
+    values = {"y_um": y, "point_std_um": point_std, "n_points": n, "placement": k,
+              "delta_T_K": dT, "offset_mm": offset}
+    if bias_model == "twin":  # the same measurement before the twin's correction
+        values["y_no_twin_um"] = _radius_error_um(plain, dT)[0]
+        values["twin_bias_um"] = twin_bias
+    if p["vary"] == "speckle":  # per-point scatter caused by speckle alone (vs. no speckle)
+        nominal = _nominal_radii(frame_dir, p["calibration"], p["renders"], p["rig"], step,
+                                 compensate, pl_mm, master, bias_model)
+        diffs = np.concatenate([plain.views[n].r_mm - nominal[n] for n in plain.views])
+        values["speckle_point_std_um"] = float(np.nanstd(diffs) * 1e3)
+    if p.get("steps"):
+        ours = _step_key(compensate, master, bias_model)
+        for key, _, (comp, mast, bias) in MC_STEPS:
+            if key == ours:
+                values[f"y_{key}_um"] = y
+                continue
+            c = _trial_calibration(p, vary, seeds, compensate=comp, master=mast, bias_model=bias)
+            values[f"y_{key}_um"] = _radius_error_um(_measure(image, c, grid, bias)[0], dT)[0]
+    return TrialOutput(values=values)
 
 
 def _render_placements(out: Path, n: int, *, rig: str, seed: int, spp: int, say,
@@ -387,7 +493,8 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
                           placements: int = 8, seed: int = 0, rig: str = "paper", spp: int = 16,
                           theta_step_deg: float = 0.5, workers: int | None = None,
                           dask_address: str | None = None, compensate: bool = True,
-                          compensation_shots: int = 1, master: bool = False,
+                          compensation_shots: int = 1, master: bool = True,
+                          bias_model: str = "twin", steps: bool = True,
                           placement_mm: float = DEFAULT_PLACEMENT_MM, say=print) -> dict:
     """Run the study (see the module docstring); returns the summary written to summary.json.
 
@@ -400,31 +507,48 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
     offsets of ``calibration`` are ignored) and the ``compensation`` input is left out.
     ``compensation_shots``: images of the reference placement each compensation is fitted
     to (jointly, :func:`lts360.recon.calibration.compensation.joint_view_offsets`); the ``compensation``
-    input's spread falls as ``1/√shots``.  ``master``: every compensation is mastered with
-    the gauge's known diameter (needs ``compensate``)."""
+    input's spread falls as ``1/√shots``.  ``master`` (default on): every compensation is
+    mastered with the gauge's known diameter (needs ``compensate``).  ``bias_model``
+    ``"twin"`` (default): every trial's section corrected by its twin (and, mastered, the
+    master's reference shots too).  ``steps``: each trial of the full Monte Carlo also
+    measured with each of :data:`MC_STEPS` (the summary's ``steps``: the paper's method beside
+    ours on the same draws)."""
+    if bias_model not in ("none", "twin"):
+        raise ValueError(f"bias_model must be none or twin, got {bias_model!r}")
     if not 1 <= int(compensation_shots) <= 100:
         raise ValueError(f"compensation_shots must be in [1, 100], got {compensation_shots}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if not 0 <= placement_mm <= 10:
         raise ValueError(f"placement_mm must be in [0, 10], got {placement_mm}")
+    if bias_model == "twin":  # refused in one line, before any render, without its optics
+        from lts360.recon.model import load_calibration
+        from lts360.twin.rig import twin_design
+
+        twin_design(load_calibration(calibration))
     renders = _render_placements(out, placements, rig=rig, seed=seed, spp=spp, say=say,
                                  placement_mm=float(placement_mm))
     base = {"calibration": str(Path(calibration).resolve()), "renders": str(renders.resolve()),
             "placements": placements, "rig": rig, "theta_step_deg": theta_step_deg,
             "placement_mm": float(placement_mm),
             "compensate": bool(compensate), "compensation_shots": int(compensation_shots)}
-    if master and compensate:  # only then: the trials of earlier studies keep their parameters
+    # only when on: the trials of earlier studies (§4.4 alone) keep their parameters
+    if master and compensate:
         base["master"] = True
+    if bias_model == "twin":
+        base["bias_model"] = "twin"
     if workers is None and dask_address is None:
         workers = 2
     kw = dict(seed=seed, workers=workers, dask_address=dask_address, say=say)
-    y, info = _run_batches(out, "mc", dict(base, vary="all"), batch=batch,
+    full = dict(base, vary="all", steps=True) if steps else dict(base, vary="all")
+    y, info = _run_batches(out, "mc", full, batch=batch,
                            max_batches=(10_000 if adaptive else max(1, math.ceil(trials / batch))),
                            adaptive=adaptive, n_dig=n_dig, **kw)
     lo, hi = coverage_interval(y)
     summary = {"M": int(len(y)), "mean_um": float(y.mean()), "u_um": float(y.std(ddof=1)),
-               "interval95_um": [lo, hi], "adaptive": adaptive, "adaptive_info": info}
+               "interval95_um": [lo, hi], "adaptive": adaptive, "adaptive_info": info,
+               "configuration": _config_label(compensate, master and compensate, bias_model),
+               "ours": _step_key(compensate, master and compensate, bias_model) or ""}
     budget = {}
     for name in INPUTS:
         if name == "compensation" and not compensate:
@@ -447,9 +571,35 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
     sp.close()
     summary["placement_mm"] = float(placement_mm)
     summary["by_offset"] = _by_offset(sorted((out / "mc").glob("batch_*/results.nc")))
+    summary["steps"] = _steps(sorted((out / "mc").glob("batch_*/results.nc")))
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     _plot(y, summary, out / "monte-carlo.png")
     return summary
+
+
+def _steps(paths) -> dict:
+    """Per configuration of :data:`MC_STEPS` the full Monte Carlo measured every draw with
+    (and, with the twin, ours before the twin's correction): M, mean, u(y), 95 % interval."""
+    import xarray as xr
+
+    cols = {key: label for key, label, _ in MC_STEPS}
+    cols["no_twin"] = "ours, before the twin's correction"
+    vals: dict[str, list] = {}
+    for path in paths:
+        with xr.open_dataset(path) as ds:
+            for key in cols:
+                name = "y_no_twin_um" if key == "no_twin" else f"y_{key}_um"
+                if name in ds:
+                    vals.setdefault(key, []).append(np.asarray(ds[name].values, float))
+    out = {}
+    for key, parts in vals.items():
+        y = np.concatenate(parts)
+        y = y[np.isfinite(y)]
+        if y.size > 1:
+            lo, hi = coverage_interval(y)
+            out[key] = {"label": cols[key], "M": int(y.size), "mean_um": float(y.mean()),
+                        "u_um": float(y.std(ddof=1)), "interval95_um": [lo, hi]}
+    return out
 
 
 def _by_offset(paths) -> list[dict]:
@@ -505,7 +655,8 @@ def _plot(y, summary, path: Path) -> None:
 
 
 def format_mc(s: dict) -> str:
-    lines = [f"Monte Carlo (GUM-S1): M = {s['M']}, y = {s['mean_um']:+.2f} µm, "
+    lines = [f"Monte Carlo (GUM-S1){', ' + s['configuration'] if s.get('configuration') else ''}"
+             f": M = {s['M']}, y = {s['mean_um']:+.2f} µm, "
              f"u(y) = {s['u_um']:.2f} µm, 95 % interval [{s['interval95_um'][0]:+.2f}, "
              f"{s['interval95_um'][1]:+.2f}] µm",
              f"GUM budget (one input at a time, √Σu_i²): u_c = {s['gum_u_um']:.2f} µm"]
@@ -513,6 +664,13 @@ def format_mc(s: dict) -> str:
         b = s["budget"][name]
         lines.append(f"  {name:14s} u_i = {b['u_um']:7.2f} µm  (mean {b['mean_um']:+.2f}, M = {b['M']})")
     d = s["dorsch"]
+    if s.get("steps"):
+        lines.append("each configuration on the same draws: mean y, u(y), 95 % interval (µm)")
+        for key, t in s["steps"].items():
+            mark = "  <- lts360" if key == s.get("ours") else ""
+            lines.append(f"  {t['label']:36s} {t['mean_um']:+7.2f} {t['u_um']:6.2f}  "
+                         f"[{t['interval95_um'][0]:+.2f}, {t['interval95_um'][1]:+.2f}]  "
+                         f"M = {t['M']}{mark}")
     if s.get("by_offset"):
         lines.append(f"against the distance from the axis (placements within "
                      f"{s.get('placement_mm', DEFAULT_PLACEMENT_MM):g} mm): offset, trials, mean y")

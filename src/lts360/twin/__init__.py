@@ -7,9 +7,9 @@ and the measured profile itself; never the truth.  Imports recon, simulator, sce
 geometry; recon never imports it (it offers a ``correct`` hook instead).
 """
 
-from lts360.twin.debias import TwinCorrector, TwinLog, twin_corrected_raw
+from lts360.twin.debias import TwinCorrector, TwinLog, twin_corrected, twin_corrected_raw
 from lts360.twin.profile import SectionProfile, prism_mesh, ray_radii, section_profile
 from lts360.twin.rig import CalibratedCamera, twin_rig
 
-__all__ = ["TwinCorrector", "TwinLog", "twin_corrected_raw", "SectionProfile", "prism_mesh", "ray_radii",
+__all__ = ["TwinCorrector", "TwinLog", "twin_corrected", "twin_corrected_raw", "SectionProfile", "prism_mesh", "ray_radii",
            "section_profile", "CalibratedCamera", "twin_rig"]

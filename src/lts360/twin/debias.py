@@ -36,7 +36,7 @@ from lts360.twin.corners import sharpen_corners
 from lts360.twin.profile import axial_form, loft_mesh, ray_radii, section_profile
 from lts360.twin.rig import laser_side_mirrors, twin_rig
 
-__all__ = ["TwinCorrector", "TwinLog", "twin_corrected_raw", "DEFAULT_TWIN_SPP", "DEFAULT_SMOOTH_DEG", "INPUT_U",
+__all__ = ["TwinCorrector", "TwinLog", "twin_corrected", "twin_corrected_raw", "DEFAULT_TWIN_SPP", "DEFAULT_SMOOTH_DEG", "INPUT_U",
            "DEFAULT_AXIAL_REACH_MM", "MAX_AXIAL_REACH_MM",
            "perturbed_design"]
 
@@ -506,20 +506,28 @@ class TwinCorrector:
                            for name, d in deltas.items()}
 
 
+def twin_corrected(result, cal: Calibration, grid, twin: TwinCorrector, *,
+                   compensate: bool = False, peak: str = "centroid"):
+    """``result`` — one image measured by :func:`~lts360.recon.triangulation.inverse.
+    inverse_triangulate` with ``cal`` on ``grid`` (``compensate`` as it was measured) — with its
+    line-centre bias removed by ``twin``: the twin image is measured by that same function."""
+    from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
+
+    plan = plan_inverse(cal, grid)
+
+    def measure(img):
+        return inverse_triangulate(img, cal, grid, peak=peak, plan=plan, compensate=compensate)
+
+    return twin(result, measure, plan)
+
+
 def twin_corrected_raw(result, cal: Calibration, grid, twin: TwinCorrector, *,
                        peak: str = "centroid"):
     """A round reference's uncompensated measurement ``result`` (on ``grid``) with its
     line-centre bias removed by ``twin``, returned as raw radii (``r_raw_mm``), for the
     mastering fit (:func:`lts360.recon.calibration.compensation.master_fit`): the masters then
     set what the twin leaves, not the bias the twin removes from every later measurement."""
-    from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
-
-    plan = plan_inverse(cal, grid)
-
-    def measure(img):
-        return inverse_triangulate(img, cal, grid, peak=peak, plan=plan)
-
-    fixed = twin(result, measure, plan)
+    fixed = twin_corrected(result, cal, grid, twin, peak=peak)
     views = {n: dataclasses.replace(v, r_raw_mm=np.where(np.isfinite(v.r_mm), v.r_mm,
                                                          v.r_raw_mm))
              for n, v in fixed.views.items()}

@@ -1,0 +1,75 @@
+"""The Monte Carlo measures as a user does: §4.4 + master + twin by default, each switchable,
+and the paper's method measured on the same draws (issue 29)."""
+
+from __future__ import annotations
+
+import inspect
+
+import numpy as np
+import pytest
+
+from lts360.cli import build_parser
+
+
+def test_the_monte_carlo_defaults_are_master_and_twin():
+    from lts360.experiments.monte_carlo import MC_STEPS, run_monte_carlo_study
+
+    sig = inspect.signature(run_monte_carlo_study).parameters
+    assert sig["master"].default is True and sig["bias_model"].default == "twin"
+    assert sig["steps"].default is True
+    assert [k for k, _, _ in MC_STEPS] == ["c44", "c44_master", "c44_master_twin"]
+    parse = build_parser().parse_args
+    a = parse(["study", "monte-carlo", "--out", "s"])
+    assert a.master is None and a.bias_model == "twin" and a.steps  # None: on unless --no-master
+    a = parse(["study", "monte-carlo", "--out", "s", "--no-master", "--bias-model", "none",
+               "--no-steps"])
+    assert a.master is False and a.bias_model == "none" and not a.steps
+
+
+def test_the_monte_carlo_refuses_an_unknown_bias_model(tmp_path):
+    from lts360.experiments.monte_carlo import run_monte_carlo_study
+
+    with pytest.raises(ValueError, match="bias_model"):
+        run_monte_carlo_study(tmp_path, calibration="unused.json", bias_model="lsq")
+    assert not (tmp_path / "renders").exists()  # refused before anything was rendered
+
+
+def test_the_monte_carlo_twin_needs_the_calibrations_optics(tmp_path, truth_calibration):
+    import dataclasses
+
+    from lts360.experiments.monte_carlo import run_monte_carlo_study
+    from lts360.recon.model import load_calibration, save_calibration
+
+    old = tmp_path / "old.json"
+    save_calibration(old, dataclasses.replace(load_calibration(truth_calibration), optics={}))
+    with pytest.raises(ValueError, match="records no optics"):
+        run_monte_carlo_study(tmp_path / "mc", calibration=old, placements=1,
+                              say=lambda *_: None, spp=1)
+    assert not (tmp_path / "mc" / "renders").exists()  # refused before any render
+
+
+def test_a_twin_corrected_trial_differs_from_the_plain_one_by_the_twins_correction(
+        tmp_path, truth_calibration):
+    """The same draw measured with and without the twin: the twin-corrected radius error is
+    the plain one less the mean bias the twin removed (the circle fit of points each moved
+    by −b(θ) moves its radius by −mean b, to first order), and, without the master (whose
+    shots the twin corrects too), the plain measurement is the §4.4-only trial itself."""
+    from lts360.experiments.monte_carlo import _render_placements, mc_trial
+    from lts360.experiments.runner import Trial
+
+    renders = _render_placements(tmp_path, 1, rig="paper", seed=3, spp=4, say=lambda *_: None)
+    base = {"calibration": str(truth_calibration), "renders": str(renders), "placements": 1,
+            "rig": "paper", "theta_step_deg": 2.0, "vary": "sensor_noise"}
+    plain = mc_trial(Trial(0, base, 21)).values
+    twin = mc_trial(Trial(0, dict(base, bias_model="twin"), 21)).values
+    assert "y_no_twin_um" not in plain
+    assert float(twin["y_no_twin_um"]) == pytest.approx(float(plain["y_um"]), abs=1e-9)
+    b = float(twin["twin_bias_um"])
+    assert np.isfinite(b) and abs(b) > 1.0  # the paper rig's line-centre bias: µm, not zero
+    moved = float(twin["y_um"]) - float(twin["y_no_twin_um"])
+    assert moved == pytest.approx(-b, abs=0.3 * abs(b))
+    # With the steps: the configuration's own y among them, the paper's method the plain one.
+    steps = mc_trial(Trial(0, dict(base, bias_model="twin", master=True, steps=True), 21)).values
+    assert float(steps["y_c44_master_twin_um"]) == float(steps["y_um"])
+    assert float(steps["y_c44_um"]) == pytest.approx(float(plain["y_um"]), abs=1e-9)
+    assert abs(float(steps["y_c44_master_um"]) - float(steps["y_c44_um"])) > 1e-3
