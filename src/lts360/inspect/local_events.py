@@ -167,7 +167,9 @@ def critical_z(rate: float, m_bins, rate_per_bin: float) -> float:
     """The ``|z|`` that noise alone exceeds somewhere on the scan with probability ``rate``."""
     k = 2.0 * float(np.sum(m_bins)) * rate_per_bin
     e = -np.log1p(-rate)
-    return float(np.sqrt(max(2.0 * np.log(k / e), 0.0)))
+    if k <= e:  # fewer expected crossings than the rate even at z = 0 (no bins: none at all)
+        return 0.0
+    return float(np.sqrt(2.0 * np.log(k / e)))
 
 
 def _remove_size_and_centre(dev: np.ndarray, th: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -326,11 +328,11 @@ def _field(r, th, var, kappa, sigma_bins, rate, rows, mask, per_bin):
     ref, nref, retaken = _reference(r, rows, mask)
     dev = _remove_size_and_centre(r - ref, th, mask)
     A, vA = matched_amplitude(dev, sigma_bins, var)
-    u = np.sqrt(vA * (1.0 + np.pi / (2.0 * np.maximum(nref, 1))))
-    u = np.where(np.isfinite(u), np.maximum(u, _U_FLOOR_MM), np.nan)  # a noise-free profile
+    u = np.sqrt(vA * (1.0 + np.pi / (2.0 * np.maximum(nref, 1)))) * kappa
+    # the floor after the scale: a noise-free scan has no spread along z (kappa 0)
+    u = np.where(np.isfinite(u), np.maximum(u, _U_FLOOR_MM), np.nan)
     with np.errstate(all="ignore"):
         z = A / u
-    u, z = u * kappa, z / kappa
     c = critical_z(rate, np.isfinite(z).sum(axis=1), per_bin)
     hit = np.nan_to_num(np.abs(z)) > c
     return {"A": A, "u": u, "z": z, "kappa": kappa, "c": c, "hit": hit, "retaken": retaken}
