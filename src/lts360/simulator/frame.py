@@ -276,18 +276,20 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
         seeds[0] = np.random.SeedSequence([int(speckle_seed), 0x5BEC])
     radiance = res.radiance_W_m2_sr.astype(np.float64)
     laser = res.laser_W_m2_sr
+    lit = laser > 0
     if speckle is None:
         speckle = noise == "realistic"
     if speckle and laser.any():
         # Position-keyed speckle on the tiles that hold laser light: a pixel's speckle is the
         # same whichever other pixels were rendered (a support frame's equals a full frame's).
-        pattern = speckle_on_tiles(laser > 0, pixel_pitch_um=pitch_um,
+        pattern = speckle_on_tiles(lit, pixel_pitch_um=pitch_um,
                                    wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
                                    magnification=magnification,
                                    rng=np.random.default_rng(seeds[0]))
-        radiance += laser * (pattern - 1.0)
+        # Added where the laser share is not 0 only (elsewhere the term is 0: the same sums).
+        on = np.flatnonzero(laser != 0)
+        radiance.flat[on] += laser.flat[on] * (pattern.flat[on] - 1.0)
     if exposure_time_s is None:
-        lit = laser > 0
         # The statistic over the laser-lit pixels only (the same values as a mask over the
         # whole frame, without converting the dark rest).
         exposure_time_s = sensor_mod.auto_exposure(
