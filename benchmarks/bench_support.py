@@ -5,6 +5,8 @@ the warm calls; the first call, which compiles, apart):
 
 * ``frame_realistic_16``: :func:`simulate_frame` at 16 spp with realistic noise and speckle,
   the default (the pixel support, when the code has one);
+* ``frame_realistic_16_moved``: the first row with the object at a new stage height in every
+  call (+0.25 mm): nothing about the geometry is the previous call's (the support computed anew);
 * ``frame_realistic_16_full``: the same with ``support="full"`` (every pixel);
 * ``frame_realistic_16_support``: the same with ``support="geometric"`` (the pixel support);
 * ``frame_noise_free_256``: :func:`simulate_frame` at 256 spp without noise, the default;
@@ -27,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import inspect
+import itertools
 import json
 import os
 import platform
@@ -35,7 +38,7 @@ import subprocess
 import time
 from pathlib import Path
 
-ROWS = ("frame_realistic_16", "frame_realistic_16_full", "frame_realistic_16_support",
+ROWS = ("frame_realistic_16", "frame_realistic_16_moved", "frame_realistic_16_full", "frame_realistic_16_support",
         "frame_noise_free_256", "frame_noise_free_256_support", "frame_realistic_16_reused", "render_full_16", "speckle_keyed", "speckle_bbox")
 
 
@@ -68,6 +71,9 @@ def main(argv=None) -> None:
     spec = SceneSpec(rig, object_meshes(obj), ambient="off")
     fns = {"render_full_16": lambda: render_radiance(spec, spp=16, seed=1)}
     fns["frame_realistic_16"] = lambda: simulate_frame(rig, obj, spp=16, seed=1, noise="realistic")
+    heights = itertools.count(1)
+    fns["frame_realistic_16_moved"] = lambda: simulate_frame(
+        rig, obj, spp=16, seed=1, noise="realistic", z_mm=0.25 * next(heights))
     fns["frame_noise_free_256"] = lambda: simulate_frame(rig, obj, spp=256, seed=1, noise="none")
     if has_support:
         from lts360.simulator.reuse import SceneCache
