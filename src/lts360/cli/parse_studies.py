@@ -75,24 +75,32 @@ def _add_plug_gauge(studies) -> None:
 
 def _add_user_steps(q) -> None:
     """The steps a user measures with (plug-gauge study and demo), each switchable."""
-    import argparse
 
     q.add_argument("--no-compensate", dest="compensate", action="store_false",
                    help="no §4.4 compensation (and so no master)")
-    q.add_argument("--master", action=argparse.BooleanOptionalAction, default=True,
+    _add_master_twin_steps(q, master_default=True, what="placement",
+                           steps="each step on and off")
+
+
+def _add_master_twin_steps(q, *, master_default, what: str, steps: str) -> None:
+    """The master, the twin and the table of steps, as the plug-gauge study, the demo and the
+    Monte Carlo take them (``what``: what each trial measures; ``steps``: what the table
+    adds)."""
+    import argparse
+
+    q.add_argument("--master", action=argparse.BooleanOptionalAction, default=master_default,
                    help="master the compensation with the gauge's known diameter (default on; "
                    "--no-master: §4.4 alone, the paper's method)")
     q.add_argument("--bias-model", choices=("none", "twin"), default="twin",
-                   help="twin (default): each placement (and the master's shots) corrected by "
-                   "its twin; none: no line-centre bias correction")
+                   help=f"twin (default): each {what}'s section (and the master's shots) "
+                   "corrected by its twin; none: no line-centre bias correction")
     q.add_argument("--no-steps", dest="steps", action="store_false",
-                   help="measure each placement only as configured (default: also with each "
-                   "step on and off, for the table of steps)")
+                   help=f"measure each {what} only as configured (default: also with {steps}, "
+                   "for the table of steps)")
 
 
 def _add_monte_carlo(studies) -> None:
     """``study monte-carlo``."""
-    import argparse
 
     q = _study_parser(studies, "monte-carlo",
                       "GUM Supplement 1 Monte Carlo of the gauge radius, GUM "
@@ -109,15 +117,8 @@ def _add_monte_carlo(studies) -> None:
     q.add_argument("--placements", type=int, default=8, help="rendered gauge placements")
     q.add_argument("--no-compensate", action="store_true",
                    help="no §4.4 compensation (and so no master)")
-    q.add_argument("--master", action=argparse.BooleanOptionalAction, default=None,
-                   help="every compensation mastered with the gauge's known diameter (default "
-                   "on; --no-master: §4.4 alone, the paper's method)")
-    q.add_argument("--bias-model", choices=("none", "twin"), default="twin",
-                   help="twin (default): every trial's section (and the master's reference "
-                   "shots) corrected by its twin; none: no line-centre bias correction")
-    q.add_argument("--no-steps", dest="steps", action="store_false",
-                   help="measure each draw only as configured (default: also with §4.4 alone "
-                   "and §4.4 + master, for the table of steps)")
+    _add_master_twin_steps(q, master_default=None, what="draw",
+                           steps="§4.4 alone and §4.4 + master")
     q.add_argument("--compensation-shots", type=int, default=1, metavar="K",
                    help="images of the reference placement each §4.4 compensation is fitted "
                    "to (default 1, as the paper)")
