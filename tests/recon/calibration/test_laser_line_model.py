@@ -120,3 +120,46 @@ def test_a_board_outside_the_image_is_a_clear_error():
     with pytest.raises(ValueError, match="outside the image"):
         fit_line_on_board(diff, board, geo, R, t + np.array([500.0, 0, 0]), K, np.zeros(5),
                           initial_normal=normal, initial_offset_mm=offset)
+
+
+def test_the_band_model_jacobian_is_its_derivative():
+    """The analytic Jacobian of the band's model against central differences of its
+    residuals, every column, on a small crop with the gain on and off."""
+    from lts360.recon.calibration.laser_line_model import _BandModel
+
+    rng = np.random.default_rng(3)
+    h, w = 12, 14
+    v, u = np.meshgrid(np.arange(h * 4) * 0.05, np.arange(w * 4) * 0.05, indexing="ij")
+    xb = np.stack([u, v + 0.1 * u], axis=-1)  # sheared board coordinates, mm
+    albedo = np.where((np.floor(xb[..., 0]) + np.floor(xb[..., 1])) % 2 == 0, 0.05, 1.0)
+    s_px = xb[..., 0].reshape(h, 4, w, 4).mean(axis=(1, 3)) - 1.4
+    crop = rng.normal(size=(h, w))
+    inside = rng.random((h, w)) > 0.2
+    p = np.array([0.4, 0.9, 0.2, 3.0, 0.05])
+    for n in (5, 4):
+        model = _BandModel(xb, albedo, s_px, 1.3, crop, inside, fixed=p[n:])
+        J = model.jacobian(p[:n])
+        assert J.shape == (inside.sum(), n)
+        for j in range(n):
+            e = np.zeros(n)
+            e[j] = 1e-6 * max(1.0, abs(p[j]))
+            num = (model.residuals(p[:n] + e) - model.residuals(p[:n] - e)) / (2 * e[j])
+            assert np.allclose(J[:, j], num, rtol=1e-5, atol=1e-7 * np.abs(num).max()), j
+
+
+def test_the_board_residuals_equal_the_supersampled_albedo():
+    """The board image's residuals from the dark squares' pixel share equal those of the
+    albedo averaged sample by sample (the pixel mean is linear in ρ)."""
+    from lts360.recon.calibration.laser_line_model import _board_residuals, _pixel_mean
+
+    rng = np.random.default_rng(4)
+    h, w = 10, 11
+    dark = rng.random((h * 4, w * 4)) > 0.5
+    crop = rng.normal(size=(h, w))
+    inside = rng.random((h, w)) > 0.3
+    res = _board_residuals(_pixel_mean(dark.astype(float), h, w), crop, inside)
+    for p in ([1.5, 2.0, 0.1, 0.05], [0.7, 1.1, -0.2, 0.3]):
+        sigma, k, b, rho = p
+        old = (k * ndimage.gaussian_filter(_pixel_mean(np.where(dark, rho, 1.0), h, w), sigma)
+               + b - crop)[inside]
+        assert np.allclose(res(np.array(p)), old, rtol=0, atol=1e-12)

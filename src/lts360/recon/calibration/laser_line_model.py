@@ -75,6 +75,64 @@ def _pixel_mean(a: np.ndarray, h: int, w: int) -> np.ndarray:
     return a.reshape(h, _SS, w, _SS).mean(axis=(1, 3))
 
 
+def _board_residuals(dark_share: np.ndarray, crop_b: np.ndarray, inside: np.ndarray):
+    """Residuals of the board image's model ``k · G_σ ∗ ⟨albedo⟩ + b`` inside the squares,
+    ``p = (σ, k, b, ρ)``, with ``⟨albedo⟩ = 1 − (1 − ρ) · dark_share`` (the pixel mean of an
+    albedo of ρ on the dark squares and 1 elsewhere is linear in ρ, so the supersampled
+    squares are averaged once, not at every evaluation).  ``dark_share``: (h, w) the pixel
+    mean of the dark squares' indicator."""
+    def board_res(p):
+        sigma, k, b, rho = p
+        a = 1.0 - (1.0 - rho) * dark_share
+        return (k * ndimage.gaussian_filter(a, abs(sigma)) + b - crop_b)[inside]
+    return board_res
+
+
+class _BandModel:
+    """The laser band's image model of :func:`fit_line_on_board`,
+    ``A · (1 + g · s) · G_σ ∗ ⟨albedo · exp(−½ ((n(φ) · x − c) / w)²)⟩``, and its analytic
+    Jacobian in ``p = (φ, c, w, A, g)`` (the first ``len(p)`` of them free, the rest
+    ``fixed``): the band's derivatives per sample, averaged over each pixel and blurred like
+    the band (the pixel mean and the blur are linear).  The last evaluation is cached (the
+    optimiser asks for the residuals and the Jacobian at the same point)."""
+
+    def __init__(self, xb, albedo, s_px, sigma, crop, inside, *, fixed=()):
+        self.xb, self.albedo, self.s_px, self.sigma = xb, albedo, s_px, sigma
+        self.crop, self.inside, self.fixed = crop, inside, list(fixed)
+        self.h, self.w = crop.shape
+        self._key = None
+
+    def _blur(self, a):
+        return ndimage.gaussian_filter(_pixel_mean(a, self.h, self.w), self.sigma)
+
+    def _evaluate(self, p):
+        if self._key is not None and np.array_equal(self._key, p):
+            return self._cache
+        phi, c, width, amp, gain = np.append(p, self.fixed[:5 - len(p)])
+        n = np.array([np.cos(phi), np.sin(phi)])
+        q = (self.xb @ n - c) / width
+        ab = self.albedo * np.exp(-0.5 * q * q)
+        blurred = self._blur(ab)
+        self._key = np.array(p, float)
+        self._cache = (phi, width, amp, gain, q, ab, blurred)
+        return self._cache
+
+    def residuals(self, p):
+        _, _, amp, gain, _, _, blurred = self._evaluate(p)
+        return (amp * (1.0 + gain * self.s_px) * blurred - self.crop)[self.inside]
+
+    def jacobian(self, p):
+        phi, width, amp, gain, q, ab, blurred = self._evaluate(p)
+        scale = amp * (1.0 + gain * self.s_px)
+        along = self.xb @ np.array([-np.sin(phi), np.cos(phi)])  # d(n · x)/dφ
+        # d band/dφ = −band q (n' · x)/w, d band/dc = band q/w, d band/dw = band q²/w.
+        aq = ab * q / width
+        cols = [scale * self._blur(-aq * along), scale * self._blur(aq),
+                scale * self._blur(aq * q), (1.0 + gain * self.s_px) * blurred,
+                amp * self.s_px * blurred]
+        return np.column_stack([c[self.inside] for c in cols[:len(p)]])
+
+
 def fit_line_on_board(diff, image_board, board: BoardGeometry, R, t, K, dist, *,
                       initial_normal, initial_offset_mm: float,
                       inset_squares: float = 0.25, margin_px: int = 20,
@@ -123,13 +181,9 @@ def fit_line_on_board(diff, image_board, board: BoardGeometry, R, t, K, dist, *,
 
     # Blur, dark share and which squares are dark, from the board image.
     best = None
+    top = float(np.percentile(crop_b[inside], 95))
     for dark in (parity, ~parity):
-        def board_res(p, dark=dark):
-            sigma, k, b, rho = p
-            a = np.where(dark, rho, 1.0)
-            model = k * ndimage.gaussian_filter(_pixel_mean(a, h, w), abs(sigma)) + b
-            return (model - crop_b)[inside]
-        top = float(np.percentile(crop_b[inside], 95))
+        board_res = _board_residuals(_pixel_mean(dark.astype(float), h, w), crop_b, inside)
         sol = least_squares(board_res, [1.5, top, 0.0, 0.05],
                             bounds=([0.05, 0.0, -np.inf, 0.0], [20.0, np.inf, np.inf, 1.0]))
         if best is None or sol.cost < best[0]:
@@ -145,19 +199,13 @@ def fit_line_on_board(diff, image_board, board: BoardGeometry, R, t, K, dist, *,
     s_px = _pixel_mean(xb @ along, h, w)
     s_px -= 0.5 * (s_px[inside].min() + s_px[inside].max())
 
-    def model(p):
-        phi, c, width, amp, gain = p
-        n = np.array([np.cos(phi), np.sin(phi)])
-        band = np.exp(-0.5 * ((xb @ n - c) / width) ** 2)
-        return amp * (1.0 + gain * s_px) * ndimage.gaussian_filter(
-            _pixel_mean(albedo * band, h, w), sigma)
-
     peak = float(crop[inside].max())
     if peak <= 0:
         raise ValueError("laser line model: no laser light on the board")
     p0 = [np.arctan2(n0[1], n0[0]), float(initial_offset_mm), 0.3 * s / 2.0, 2.0 * peak, 0.0]
     free = slice(0, 5 if along_line_gain else 4)
-    sol = least_squares(lambda p: (model(np.append(p, p0[len(p):])) - crop)[inside], p0[free],
+    band = _BandModel(xb, albedo, s_px, sigma, crop, inside, fixed=p0[free.stop:])
+    sol = least_squares(band.residuals, p0[free], jac=band.jacobian,
                         x_scale=[1e-3, 1e-3 * s, 1e-2 * s, peak, 1e-2 / s][free],
                         bounds=([-np.inf, -np.inf, 0.01 * s, 0.0, -np.inf][free],
                                 [np.inf, np.inf, 2.0 * s, np.inf, np.inf][free]))
