@@ -209,3 +209,48 @@ def test_a_board_moved_in_a_loaded_scene_renders_as_a_fresh_scene(variant, rig, 
             np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6 * float(b.max()))
         assert moved.radiance_W_m2_sr.max() > 0
     assert len(context["scenes"]) == 2  # one per laser state, each loaded once
+
+
+def test_mirror_edge_pixels_hold_every_pixel_whose_samples_differ(variant, rig):
+    """The board-less picture (mirrors under the ambient light) at one sample per pixel and at
+    64: they differ only on the pixels :func:`mirror_edge_pixels` lists, even with no safety
+    margin (the edges of the mirrors seen directly and through the mirrors), which are a small
+    part of the film; without mirrors nothing is listed and the picture is uniform."""
+    from lts360.simulator.board_window import mirror_edge_pixels
+    from lts360.simulator.render import render_radiance
+    from lts360.simulator.scene import SceneSpec
+
+    spec = SceneSpec(rig, (), ambient="bright")
+    one = render_radiance(spec, spp=1, seed=9, scale=SCALE, laser_on=False).radiance_W_m2_sr
+    many = render_radiance(spec, spp=64, seed=9, scale=SCALE, laser_on=False).radiance_W_m2_sr
+    px = mirror_edge_pixels(rig, scale=SCALE, margin_px=0.0)
+    listed = np.zeros(one.shape, bool)
+    listed[px[:, 1], px[:, 0]] = True
+    differ = one != many
+    assert differ.sum() > 20  # the mirrors' edges are in the picture
+    assert not np.any(differ & ~listed)
+    assert listed.mean() < 0.3
+    assert len(mirror_edge_pixels(replace(rig, mirrors=()), scale=SCALE)) == 0
+
+
+def test_the_context_picture_equals_a_full_render_but_on_the_mirror_edges(variant, rig):
+    """The board-less picture of the windowed calibration render: outside the mirrors' edges
+    the full 64-spp render to the bit, on them the same expectation."""
+    from lts360.simulator.board_window import mirror_edge_pixels
+    from lts360.simulator.calib_render import CONTEXT_SEED, _context_picture
+    from lts360.simulator.render import render_radiance
+    from lts360.simulator.scene import SceneSpec
+
+    for r in (rig, replace(rig, mirrors=())):
+        pic = _context_picture(r, spp=64, thin_lens=True, scale=SCALE)
+        full = render_radiance(SceneSpec(r, (), ambient="bright"), spp=64, seed=CONTEXT_SEED,
+                               scale=SCALE, laser_on=False)
+        a, b = full.radiance_W_m2_sr, pic.radiance_W_m2_sr
+        px = mirror_edge_pixels(r, scale=SCALE)
+        edge = np.zeros(a.shape, bool)
+        edge[px[:, 1], px[:, 0]] = True
+        assert np.array_equal(a[~edge], b[~edge]) and pic.spp == 64
+        assert not pic.laser_W_m2_sr.any()
+        if edge.any():
+            assert abs(a[edge].mean() - b[edge].mean()) < 5e-3
+            assert np.isclose(a[edge].std(), b[edge].std(), rtol=0.1)

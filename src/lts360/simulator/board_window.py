@@ -27,7 +27,7 @@ import numpy as np
 
 from lts360.geometry.camera import distort_normalized, scale_intrinsics, undistort_normalized
 
-__all__ = ["board_windows", "board_pixels", "view_box", "merge_boxes", "mirror_paths", "clip_near",
+__all__ = ["board_windows", "board_pixels", "mirror_edge_pixels", "edge_mask", "view_box", "merge_boxes", "mirror_paths", "clip_near",
            "blur_radius_norm", "FILTER_MARGIN_PX", "SAFETY_MARGIN_PX"]
 
 #: Pixel footprint plus Mitsuba's ``box`` filter (radius 0.5 px): a sample lands in its own
@@ -246,6 +246,56 @@ def _outline_mask(uv: np.ndarray, pad_px: float, width: int, height: int) -> np.
     return grown[off:off + height, off:off + width].astype(bool)
 
 
+def edge_mask(poly_cam_mm: np.ndarray, K: np.ndarray, dist, width: int, height: int, *,
+              aperture_radius_mm: float = 0.0, focus_distance_mm: float = 1.0,
+              margin_px: float = SAFETY_MARGIN_PX, stretch: float | None = None,
+              samples_per_edge: int = 4096) -> np.ndarray:
+    """(height, width) bool: the pixels that the *edges* of a planar convex polygon (camera
+    frame, mm) can touch, padded as :func:`view_box` pads its box (the lens blur, the sample
+    spacing, the pixel footprint and ``margin_px``).
+
+    Edge samples beyond the film's largest normalised radius plus the blur are left out (they
+    cannot reach the film; the distortion is monotonic only over it)."""
+    import cv2
+
+    K = np.asarray(K, dtype=float)
+    out = np.zeros((height, width), bool)
+    P = clip_near(poly_cam_mm)
+    if len(P) < 3:
+        return out
+    Q = P[:, :2] / P[:, 2:3]
+    rho = float(np.max(blur_radius_norm(aperture_radius_mm, focus_distance_mm, P[:, 2])))
+    if stretch is None:
+        stretch = _stretch(K, dist, width, height)
+    border_xy = _to_norm(_film_border_px(width, height), K, dist)
+    r_keep = float(np.max(np.hypot(border_xy[:, 0], border_xy[:, 1]))) + rho
+    t = np.arange(samples_per_edge + 1) / samples_per_edge
+    runs, spacing = [], 0.0
+    for a, b in zip(Q, np.roll(Q, -1, axis=0)):
+        e = a[None, :] + t[:, None] * (b - a)[None, :]
+        keep = np.hypot(e[:, 0], e[:, 1]) <= r_keep
+        # Runs of consecutive kept samples (an edge may leave the film's disk and come back).
+        cuts = np.flatnonzero(np.diff(keep.astype(np.int8))) + 1
+        for run_xy, run_keep in zip(np.split(e, cuts), np.split(keep, cuts)):
+            if run_keep[0]:
+                uv = _to_px(run_xy, K, dist)
+                if len(uv) > 1:
+                    spacing = max(spacing, float(np.max(np.linalg.norm(np.diff(uv, axis=0),
+                                                                       axis=1))))
+                runs.append(uv)
+    if not runs:
+        return out
+    pad = rho * stretch + spacing + FILTER_MARGIN_PX + float(margin_px)
+    r = int(np.ceil(pad)) + 1
+    off = r + 1  # a canvas with a border: parts just beyond the film count too
+    canvas = np.zeros((height + 2 * off, width + 2 * off), np.uint8)
+    big = 4 * (width + height + 2 * off)  # keep cv2's fixed-point coordinates in range
+    polys = [np.rint((np.clip(uv, -big, big) + off) * 16).astype(np.int32) for uv in runs]
+    cv2.polylines(canvas, polys, False, 1, lineType=cv2.LINE_8, shift=4)
+    disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    return cv2.dilate(canvas, disk)[off:off + height, off:off + width].astype(bool)
+
+
 def _intersect(a, b):
     if a is None or b is None:
         return None
@@ -359,5 +409,65 @@ def board_pixels(rig, board, *, thin_lens: bool = True, max_bounces: int = 2, sc
             continue
         x0, y0, x1, y1 = b
         covered[y0:y1 + 1, x0:x1 + 1] |= True if mask is None else mask[y0:y1 + 1, x0:x1 + 1]
+    y, x = np.nonzero(covered)
+    return np.column_stack([x, y])
+
+
+def mirror_edge_pixels(rig, *, thin_lens: bool = True, max_bounces: int = 2, scale: float = 1.0,
+                       margin_px: float = SAFETY_MARGIN_PX) -> np.ndarray:
+    """Pixels of a picture of ``rig`` without any board (its mirrors under a uniform ambient
+    light) whose samples may see different things: outside them every camera ray of a pixel
+    follows the same mirror sequence to the same uniform environment, so the pixel's value
+    is the same for one sample as for any number.
+
+    The picture changes only across the edges of the mirror rectangles, seen directly and
+    through every mirror sequence the renderer follows (a rectangle seen through
+    ``max_bounces`` mirrors bounds where a ray would meet one mirror too many): these are the
+    pixels within the padding of :func:`view_box` of each such edge (the lens blur, the
+    sample spacing, the pixel footprint and ``margin_px``), kept where the rays can go
+    through the mirrors in front of it (each of those mirrors' filled, padded images).
+    Same parameters as :func:`board_pixels`; no mirrors: no pixels.
+
+    Returns
+    -------
+    (n, 2) int
+        ``(x, y)`` of each pixel once, row-major.
+    """
+    cam = rig.camera
+    K = scale_intrinsics(cam.K, scale)
+    dist = np.asarray(cam.distortion, dtype=float)
+    W = max(1, int(round(cam.width_px * scale)))  # as camera_to_mitsuba
+    H = max(1, int(round(cam.height_px * scale)))
+    lens = {"aperture_radius_mm": float(cam.aperture_diameter_mm) / 2.0 if thin_lens else 0.0,
+            "focus_distance_mm": float(cam.focus_distance_mm)}
+    stretch = _stretch(K, dist, W, H)
+    R, t = np.asarray(cam.R, dtype=float), np.asarray(cam.t_mm, dtype=float)
+
+    def image(k, T, edges):
+        """Film mask of mirror ``k`` seen through the mirrors of ``T`` (its box where the
+        outline is not known); all False where it cannot be seen."""
+        X = np.asarray(rig.mirrors[k].corners_mm, dtype=float)
+        X = (X @ T[:3, :3].T + T[:3, 3]) @ R.T + t
+        if edges:
+            return edge_mask(X, K, dist, W, H, margin_px=margin_px, stretch=stretch, **lens)
+        box, mask = view_box(X, K, dist, W, H, margin_px=margin_px, stretch=stretch,
+                             outline=True, **lens)
+        out = np.zeros((H, W), bool)
+        if box is not None:
+            x0, y0, x1, y1 = box
+            out[y0:y1 + 1, x0:x1 + 1] = True if mask is None else mask[y0:y1 + 1, x0:x1 + 1]
+        return out
+
+    covered = np.zeros((H, W), bool)
+    for seq, _ in mirror_paths(rig.mirrors, max_bounces):
+        # The rays that went through ``seq`` (object side first): inside each of its mirrors'
+        # images, each seen through the mirrors after it.
+        through = np.ones((H, W), bool)
+        T_after = np.eye(4)
+        for k in reversed(seq):
+            through &= image(k, T_after, False)
+            T_after = T_after @ rig.mirrors[k].T
+        for k in range(len(rig.mirrors)):
+            covered |= image(k, T_after, True) & through
     y, x = np.nonzero(covered)
     return np.column_stack([x, y])
