@@ -226,8 +226,10 @@ def _prepare(image, board, R0, t0, K, dist, inset_squares):
     return crop, img, inside, first_dark, top, edge_mm
 
 
-def _solve(model, n_geometric: int, top: float, tol: float = 1e-10, photometric=None):
+def _solve(model, n_geometric: int, top: float, tol: float = 1e-8, photometric=None):
     # p: the geometry (pose or homography), then blur σ, gain, dark level, light slope (2).
+    # tol 1e-8: the corners of four demo mirror shots within 1.3e-8 px of those at 1e-10,
+    # with a fifth fewer evaluations.
     if photometric is None:
         photometric = [1.5, top, 0.05, 0.0, 0.0]
     p0 = np.concatenate([np.zeros(n_geometric), photometric])
