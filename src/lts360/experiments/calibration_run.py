@@ -188,6 +188,7 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     truth = None
+    early = None  # the camera shots' corners found while rendering
     if images_dir is None:
         from lts360.scenes.calib_plan import plan_calibration
         from lts360.scenes.rig_io import load_rig
@@ -207,9 +208,19 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
         tmp = out / ".images.partial"
         shutil.rmtree(tmp, ignore_errors=True)
         bar = _bar(len(shots), "rendering")
-        rendered = render_calibration_images(rig, shots, tmp, noise=noise, seed=seed, spp=spp,
-                                             thin_lens=thin_lens, target_spp=target_spp,
-                                             progress=lambda name: bar.update(1))
+        early = _EarlyCorners(shots)
+
+        def rendered_one(name):
+            bar.update(1)
+            early.add(name, tmp)
+
+        try:
+            rendered = render_calibration_images(rig, shots, tmp, noise=noise, seed=seed,
+                                                 spp=spp, thin_lens=thin_lens,
+                                                 target_spp=target_spp, progress=rendered_one)
+        except BaseException:
+            early.cancel()
+            raise
         bar.close()
         shutil.rmtree(out / "images", ignore_errors=True)
         tmp.replace(out / "images")
@@ -217,8 +228,9 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
         write_json(out / "truth.json", truth)
         images_dir = out / "images"
     images = read_calibration_images(images_dir)
+    known = early.result(images.camera_board) if early is not None else {}
     result = calibrate_rig(images, tangential=tangential, progress=say,
-                           camera_model_rounds=camera_model_rounds)
+                           camera_model_rounds=camera_model_rounds, camera_corners=known)
     from dataclasses import replace as _replace
 
     from lts360.scenes.rig_io import load_rig as _load_rig
@@ -245,6 +257,50 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
     except Exception as exc:  # a figure must not lose a calibration
         say(f"fig8.png not written: {exc}")
     return report
+
+
+class _EarlyCorners:
+    """The camera shots' corners, found while the next shots render (one thread): the
+    renderer leaves a core idle between its kernels, and the corner detection
+    (:func:`lts360.recon.calibration.camera.detect_corners`, the same call on the same
+    image as :func:`calibrate_rig` makes) fills it.  :meth:`result` hands them over only for
+    the board the manifest names."""
+
+    def __init__(self, shots):
+        from lts360.recon.calibration.board import BoardGeometry
+
+        cam = [s for s in shots if s.kind == "camera"]
+        self.names = {s.name for s in cam}
+        self.board = (BoardGeometry(tuple(int(v) for v in cam[0].board.pattern_size),
+                                    float(cam[0].board.square_mm)) if cam else None)
+        self.pool = None
+        self.futures = {}
+
+    def add(self, name: str, folder: Path) -> None:
+        """Shot ``name`` was written to ``folder``: detect its corners if it is a camera shot."""
+        if name not in self.names:
+            return
+        from concurrent.futures import ThreadPoolExecutor
+
+        from lts360.recon.calibration.camera import detect_corners
+        from lts360.recon.images import read_image
+
+        if self.pool is None:
+            self.pool = ThreadPoolExecutor(max_workers=1)
+        self.futures[name] = self.pool.submit(detect_corners, read_image(folder / f"{name}.png"),
+                                              self.board)
+
+    def result(self, board) -> dict:
+        """``{name: corners}`` (``None``: board not found); empty if ``board`` is another."""
+        if self.pool is None:
+            return {}
+        out = {n: f.result() for n, f in self.futures.items()}
+        self.pool.shutdown()
+        return out if board == self.board else {}
+
+    def cancel(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown(wait=False, cancel_futures=True)
 
 
 def _bar(total: int, desc: str):

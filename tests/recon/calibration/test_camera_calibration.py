@@ -210,3 +210,41 @@ def test_the_board_model_rounds_calibrate_the_camera_from_every_pixel():
     assert np.all(np.abs(cal.dist[:2]) < 0.02)
     assert cal.rms_px < 0.01 < sb.rms_px
     assert abs(sb.K[0, 0] / K[0, 0] - 1) > 10 * abs(cal.K[0, 0] / K[0, 0] - 1)
+
+
+def test_corners_found_beforehand_give_the_same_calibration(monkeypatch):
+    """``corners=`` (found while the images were rendered) is the detector's output handed
+    over: the same calibration as detecting them here; a count that does not match the
+    images is refused.  Synthetic corners as above, the detector a lookup."""
+    import lts360.recon.calibration.camera as cc
+    from lts360.geometry.camera import project_points
+    from lts360.scenes.calib_plan import plan_calibration
+    from lts360.scenes.rig_io import load_rig
+
+    rig = load_rig("paper")
+    cam = rig.camera
+    shots = [s for s in plan_calibration(rig, n_camera=8, n_mirror=1, n_laser=2, seed=3)
+             if s.kind == "camera"]
+    rng = np.random.default_rng(6)
+    corners = [project_points(s.board.corners_world_mm(), cam.K, None, cam.R, cam.t_mm)
+               + rng.normal(0.0, 0.03, (len(s.board.corners_world_mm()), 2)) for s in shots]
+    corners[2] = None  # a board not found
+    images = [np.full((cam.height_px, cam.width_px), k, np.uint8) for k in range(len(shots))]
+    calls = []
+
+    def lookup(im, board):
+        calls.append(int(im[0, 0]))
+        c = corners[int(im[0, 0])]
+        return None if c is None else c.copy()
+
+    monkeypatch.setattr(cc, "detect_corners", lookup)
+    geo = BoardGeometry(shots[0].board.pattern_size, shots[0].board.square_mm)
+    here = calibrate_camera(images, geo, zero_tangent=True)
+    assert len(calls) == len(images)
+    given = calibrate_camera(images, geo, zero_tangent=True, corners=corners)
+    assert len(calls) == len(images)  # not detected again
+    np.testing.assert_array_equal(given.K, here.K)
+    np.testing.assert_array_equal(given.used, here.used)
+    assert not given.used[2]
+    with pytest.raises(ValueError, match="corner sets"):
+        calibrate_camera(images, geo, corners=corners[:-1])

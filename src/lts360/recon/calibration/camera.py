@@ -280,7 +280,7 @@ def calibrate_camera(images, board: BoardGeometry, *, max_image_rms_px: float = 
                      zero_tangent: bool = False, min_images: int = 4,
                      corner_outlier_px: float = 0.25, board_model_rounds: int = 0,
                      model_outlier_px: float = 0.05, jackknife: bool = True,
-                     progress=None) -> CameraCalibration:
+                     progress=None, corners=None) -> CameraCalibration:
     """Zhang calibration of the camera from images of a chessboard.
 
     ``fix_k3`` keeps k3 = 0 and ``zero_tangent`` keeps p1 = p2 = 0 (OpenCV's
@@ -306,6 +306,9 @@ def calibrate_camera(images, board: BoardGeometry, *, max_image_rms_px: float = 
     ``jackknife`` (default): also the delete-one-board covariance of the intrinsics
     (:func:`intrinsics_jackknife`, one more Zhang solution per kept board).
 
+    ``corners``: per image, what ``detect_corners(image, board)`` returns for it (found
+    beforehand, e.g. while the images were being taken); ``None``: detected here.
+
     Raises
     ------
     ValueError
@@ -320,7 +323,12 @@ def calibrate_camera(images, board: BoardGeometry, *, max_image_rms_px: float = 
     if len(shapes) != 1 or len(next(iter(shapes))) != 2:
         raise ValueError(f"calibrate_camera: images must be 2-D and of one size, got {sorted(shapes)}")
     h, w = next(iter(shapes))
-    found = [detect_corners(im, board) for im in images]
+    if corners is None:
+        found = [detect_corners(im, board) for im in images]
+    elif len(corners) != len(images):
+        raise ValueError(f"calibrate_camera: {len(corners)} corner sets for {len(images)} images")
+    else:
+        found = [None if c is None else np.asarray(c, dtype=np.float64) for c in corners]
     used = np.array([c is not None for c in found])
     obj = board.object_points()
     keep = [None if c is None else np.ones(len(c), bool) for c in found]

@@ -237,7 +237,8 @@ CAMERA_MODEL_ROUNDS = 0
 
 def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
                   progress=None, use_laser_boards_for_mirrors: bool = True,
-                  camera_model_rounds: int = CAMERA_MODEL_ROUNDS) -> RigCalibrationResult:
+                  camera_model_rounds: int = CAMERA_MODEL_ROUNDS,
+                  camera_corners: dict | None = None) -> RigCalibrationResult:
     """Calibrate camera, mirrors and laser plane from the manifest's images.
 
     ``tangential``: estimate the tangential distortion p1, p2 too.  Off by default — k1, k2
@@ -253,6 +254,10 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
     their image model (``board_model_rounds`` of
     :func:`lts360.recon.calibration.camera.calibrate_camera`); 0: on the detected corners.
 
+    ``camera_corners``: ``{shot name: detect_corners(image, camera_board)}`` for camera shots
+    whose corners were found beforehand (while the images were rendered); the others are
+    detected here.
+
     Raises
     ------
     ValueError
@@ -260,7 +265,8 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
     """
     say = progress or (lambda msg: None)
     board = images.board
-    cam, names = _calibrate_camera(images, tangential, camera_model_rounds, say)
+    cam, names = _calibrate_camera(images, tangential, camera_model_rounds, say,
+                                   camera_corners or {})
     K, dist = cam.K, cam.dist
     used_names = tuple(n for n, u in zip(names, cam.used) if u)
     skipped: dict[str, str] = {n: "board not found or reprojection outlier"
@@ -293,16 +299,21 @@ def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
 
 
 def _calibrate_camera(images: CalibrationImages, tangential: bool, camera_model_rounds: int,
-                      say) -> tuple[CameraCalibration, list[str]]:
-    """Step 1: Zhang's method on the ``camera`` shots; returns it and the shots' names."""
+                      say, known: dict) -> tuple[CameraCalibration, list[str]]:
+    """Step 1: Zhang's method on the ``camera`` shots (their corners from ``known`` where it
+    has them); returns it and the shots' names."""
+    from lts360.recon.calibration.camera import detect_corners
+
     direct, names = [], []
     for s in images.shots:
         if s["kind"] == "camera":
             direct.append(_read(images.root / s["image"]))
             names.append(s["name"])
     say(f"camera: Zhang's method on {len(direct)} images")
+    corners = [known[n] if n in known else detect_corners(im, images.camera_board)
+               for n, im in zip(names, direct)]
     cam = calibrate_camera(direct, images.camera_board, zero_tangent=not tangential,
-                           board_model_rounds=camera_model_rounds,
+                           board_model_rounds=camera_model_rounds, corners=corners,
                            progress=lambda i, n: say(f"camera: board model {i}/{n}")
                            if i == n else None)
     return cam, names
