@@ -254,3 +254,26 @@ def test_the_context_picture_equals_a_full_render_but_on_the_mirror_edges(varian
         if edge.any():
             assert abs(a[edge].mean() - b[edge].mean()) < 5e-3
             assert np.isclose(a[edge].std(), b[edge].std(), rtol=0.1)
+
+
+def test_growing_the_drawn_pixels_equals_dilating_the_whole_canvas():
+    """``_grow`` dilates only the drawn pixels' box: the same film mask as dilating the whole
+    canvas, for shapes inside the film, across its border and at the canvas's corner, and
+    none for an empty canvas."""
+    cv2 = pytest.importorskip("cv2")
+    from lts360.simulator.board_window import _grow
+
+    width, height, r = 90, 70, 6
+    off = r + 1
+    rng = np.random.default_rng(8)
+    disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    for pts in ([(30, 20), (60, 25), (45, 50)], [(-5, -5), (20, 3), (2, 30)],
+                [(80, 60), (96, 75), (70, 83)], list(map(tuple, rng.integers(-8, 95, (5, 2))))):
+        canvas = np.zeros((height + 2 * off, width + 2 * off), np.uint8)
+        poly = (np.array(pts) + off).astype(np.int32)
+        cv2.polylines(canvas, [poly], True, 1)
+        full = cv2.dilate(canvas, disk)[off:off + height, off:off + width].astype(bool)
+        got = _grow(canvas, r, off, width, height)
+        assert got.any() and np.array_equal(got, full)
+    empty = np.zeros((height + 2 * off, width + 2 * off), np.uint8)
+    assert not _grow(empty, r, off, width, height).any()

@@ -241,9 +241,30 @@ def _outline_mask(uv: np.ndarray, pad_px: float, width: int, height: int) -> np.
     poly = np.rint((uv + off) * 16).astype(np.int32)  # 4 fractional bits
     cv2.fillPoly(canvas, [poly], 1, lineType=cv2.LINE_8, shift=4)
     cv2.polylines(canvas, [poly], True, 1, lineType=cv2.LINE_8, shift=4)
+    return _grow(canvas, r, off, width, height)
+
+
+def _grow(canvas: np.ndarray, r: int, off: int, width: int, height: int) -> np.ndarray:
+    """The film's part (offset ``off`` in ``canvas``) of ``canvas`` dilated by a disk of
+    radius ``r``, as bool.  Only the drawn pixels' bounding box plus ``r`` is dilated: the
+    same result as dilating the whole canvas (nothing else is within ``r`` of a drawn pixel),
+    in a fraction of the time for a small polygon."""
+    import cv2
+
+    out = np.zeros((height, width), bool)
+    x, y, w, h = cv2.boundingRect(canvas)
+    if w == 0 or h == 0:
+        return out
+    x0, y0 = max(x - r, 0), max(y - r, 0)
+    x1, y1 = min(x + w + r, canvas.shape[1]), min(y + h + r, canvas.shape[0])
     disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-    grown = cv2.dilate(canvas, disk)
-    return grown[off:off + height, off:off + width].astype(bool)
+    grown = cv2.dilate(np.ascontiguousarray(canvas[y0:y1, x0:x1]), disk)
+    fx0, fy0 = max(x0 - off, 0), max(y0 - off, 0)
+    fx1, fy1 = min(x1 - off, width), min(y1 - off, height)
+    if fx1 > fx0 and fy1 > fy0:
+        out[fy0:fy1, fx0:fx1] = grown[fy0 + off - y0:fy1 + off - y0,
+                                      fx0 + off - x0:fx1 + off - x0] > 0
+    return out
 
 
 def edge_mask(poly_cam_mm: np.ndarray, K: np.ndarray, dist, width: int, height: int, *,
@@ -292,8 +313,7 @@ def edge_mask(poly_cam_mm: np.ndarray, K: np.ndarray, dist, width: int, height: 
     big = 4 * (width + height + 2 * off)  # keep cv2's fixed-point coordinates in range
     polys = [np.rint((np.clip(uv, -big, big) + off) * 16).astype(np.int32) for uv in runs]
     cv2.polylines(canvas, polys, False, 1, lineType=cv2.LINE_8, shift=4)
-    disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-    return cv2.dilate(canvas, disk)[off:off + height, off:off + width].astype(bool)
+    return _grow(canvas, r, off, width, height)
 
 
 def _intersect(a, b):
