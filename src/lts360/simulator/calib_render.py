@@ -108,7 +108,8 @@ def _context_picture(scene_rig, *, spp, thin_lens, scale) -> RenderResult:
     of a pixel may part (:func:`lts360.simulator.board_window.mirror_edge_pixels`; no mirrors:
     none).  Measured on the paper rig (1280 × 1024, 64 spp): all 15 922 pixels where the
     one-sample picture differs from the full 64-spp render lie among the 100 176 re-rendered
-    (7.6 % of the film), the others equal to the bit; 0.3 s + 0.7 s instead of 9 s."""
+    (7.6 % of the film), the others equal to the bit; 0.85 s instead of 9.8 s (6.5 s of CPU
+    against 0.84; 2026-12-04, other work sharing the machine)."""
     spec = SceneSpec(scene_rig, (), ambient="bright")
     one = render_radiance(spec, spp=1, seed=CONTEXT_SEED, thin_lens=thin_lens, laser_on=False,
                           scale=scale)
