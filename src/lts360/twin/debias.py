@@ -1,15 +1,23 @@
 """Model-based line-centre bias correction: measure the twin of the section with the same
 plan, and subtract what the chain does to a profile whose radii are known exactly.
 
-For each section: the measured points give a closed profile (:mod:`lts360.twin.profile`); its
-prism is rendered noise-free through the calibrated rig with the rig file's optics
-(:mod:`lts360.twin.rig`: the camera sees it through the calibrated mirrors, the laser lights
-it through them turned perpendicular to the calibrated sheet), only on the pixels the plan reads; the twin image is measured by the
-very function (same grid, windows, detector, compensation, rejection) that measured the real
-image.  Per view and θ the bias is ``b = r_twin_measured − r_twin_exact`` (the exact radius of
-the prism along the same ray), smoothed along θ over ``smooth_deg`` (the twin's render noise),
-and the real radii become ``r − b``.  A valid point farther than ``smooth_deg / 2`` from any
-twin estimate of its view keeps its radius and is counted as uncorrected.
+For each section: each view's measured points give that view's closed profile, its own points
+wherever it has them and the other views' points, moved onto it by the views' offsets where
+they overlap, elsewhere (:func:`~lts360.twin.profile.view_offsets`,
+:func:`~lts360.twin.profile.view_profile`): each view's twin lies where that view measured the
+section, its calibration's errors and its own bias included, without the seams that one
+profile of all views' points has where a view's points give way to another's (at each view's
+ends, where its correction is largest).  Each view's prism is rendered noise-free through the
+calibrated rig with the rig file's optics (:mod:`lts360.twin.rig`: the camera sees it through
+the calibrated mirrors, the laser lights it through them turned perpendicular to the
+calibrated sheet) on that view's pixels of the plan only (:func:`view_pixels`, one loaded
+scene, its vertices moved from view to view), the parts put together into one twin image,
+which is measured by the very function (same grid, windows, detector, compensation,
+rejection) that measured the real image.  Per view and θ the bias is
+``b = r_twin_measured − r_twin_exact`` (the exact radius of the view's prism along the same
+ray), smoothed along θ over ``smooth_deg`` (the twin's render noise), and the real radii
+become ``r − b``.  A valid point farther than ``smooth_deg / 2`` from any twin estimate of its
+view keeps its radius and is counted as uncorrected.
 
 What the correction cannot know is what the twin does not model: the real surface's micro-
 structure and material beyond the chosen BSDF, and the geometry between the sections (the prism
