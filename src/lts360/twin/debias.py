@@ -598,9 +598,10 @@ class TwinCorrector:
                     else profile)
             sharp, found = sharpen_corners(fine)
             if found:
-                fine_views = (self._view_profiles(result, offsets, fine=True)
-                              if profile.smooth_deg > 1.0 else views)
-                s_views = {n: sharpen_corners(p)[0] for n, p in fine_views.items()}
+                # each view's sharp twin: the common one's, moved by the view's offset (a
+                # view's own points near a corner it sees at grazing incidence round it more)
+                s_views = {n: dataclasses.replace(sharp, center_mm=sharp.center_mm + offsets[n])
+                           for n in views}
                 _, s_twin, s_bias, s_parts = self._bias(result, measure, plan, sharp, s_views, k)
                 zones = self._choose_corners(result, profile, found, twin, s_twin, entry)
                 if any(z.any() for z in zones.values()):
