@@ -50,9 +50,10 @@ What the corrections leave (:class:`~lts360.design.model.Conditions`):
   bias and the digital twin", twin-corrected |bias| ≤ 1.35 µm of 12.7 µm at Ø6 mm and
   ≤ 0.53 µm of 6.8 µm at Ø12–28 mm).
 
-Not in the closed form: the projection's own curvature (perspective; ≲ r/Z of the bias), an
-intensity gradient along the line, the second-order terms of the blur (``(σ_t/r)⁴``), pixel
-locking (zero-mean over a section) and the renderer's sampling.
+Not in the closed form: the projection's own curvature (perspective; ≲ r/Z of the bias), the
+second-order terms of the blur (``(σ_t/r)⁴``), the thin lens's defocus beyond a blur of its
+variance (a strongly defocused view reads more: STUDIES.md, "The design model's line-centre
+bias"), pixel locking (zero-mean over a section) and the renderer's sampling.
 """
 
 from __future__ import annotations
