@@ -38,6 +38,7 @@ def test_optimize_bad_input(tmp_path, capsys, argv, message):
     (["--out", "OUT", "--placements", "1"], "placements: must be an integer >= 2"),
     (["--out", "OUT", "--placement-mm", "-1"], "placement"),
     (["--out", "OUT", "--shares"], "--pipeline: not with --shares"),
+    (["--out", "OUT", "--spp", "0"], "spp: must be an integer in [1, 4096]"),
 ])
 def test_check_pipeline_bad_input(tmp_path, capsys, argv, message):
     """``design check --pipeline``: one line, exit 2, before anything is rendered."""
@@ -45,6 +46,14 @@ def test_check_pipeline_bad_input(tmp_path, capsys, argv, message):
     assert main(["design", "check", "paper", "--pipeline", *argv]) == 2
     err = capsys.readouterr().err.strip()
     assert message in err and "\n" not in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_pipeline_options_need_pipeline(tmp_path, capsys):
+    for argv in (["--out", str(tmp_path / "o")], ["--no-master-check"]):
+        assert main(["design", "check", "paper", *argv]) == 2
+        err = capsys.readouterr().err.strip()
+        assert "need --pipeline" in err and "\n" not in err
     assert list(tmp_path.iterdir()) == []
 
 

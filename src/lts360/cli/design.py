@@ -229,7 +229,10 @@ def add_design_parser(sub) -> None:
                       "per-point σ (renders; minutes)")
     q.add_argument("rigs", nargs="+", help="presets or rig TOML files")
     q.add_argument("--draws", type=int, default=200, help="noisy images per rig (default 200)")
-    q.add_argument("--spp", type=int, default=16)
+    q.add_argument("--spp", type=int, default=None,
+                   help="samples per pixel of the renders (default 16; 64 with --pipeline, "
+                        "where 16 spp of sampling noise at f/1.4 is as large as the image's "
+                        "own)")
     q.add_argument("--seed", type=int, default=0)
     q.add_argument("--json", default=None, metavar="FILE", help="write the results as JSON")
     q.add_argument("--shares", action="store_true",
@@ -255,6 +258,9 @@ def add_design_parser(sub) -> None:
                    help="with --pipeline: placements per seed (default 5)")
     q.add_argument("--out", default=None,
                    help="with --pipeline: output folder (OUT/<rig>/seed<S>/ is reused when done)")
+    q.add_argument("--no-master-check", action="store_true",
+                   help="with --pipeline: do not measure a noise-free centred image with each "
+                        "seed's mastered calibration (what the master left, per seed)")
     q.set_defaults(func=cmd_design_check)
 
 
@@ -277,8 +283,9 @@ def cmd_design_check(args) -> int:
 
     if args.pipeline:
         return _check_pipeline(args)
-    if args.out is not None:
-        raise UsageError("--out needs --pipeline")
+    if args.out is not None or args.no_master_check:
+        raise UsageError("--out and --no-master-check need --pipeline")
+    args.spp = 16 if args.spp is None else args.spp
     if args.calibrations is not None:
         return _check_calibrations(args)
     if not args.shares:
@@ -305,7 +312,8 @@ def _check_pipeline(args) -> int:
     try:
         res = check_pipeline(args.rigs, args.out, seeds=seeds, placements=args.placements,
                              placement_mm=0.3 if args.placement_mm is None
-                             else args.placement_mm)
+                             else args.placement_mm, spp=64 if args.spp is None else args.spp,
+                             masters=not args.no_master_check)
     except ValueError as exc:
         raise UsageError(_first_line(exc)) from None
     print("\n".join(format_pipeline(res)))

@@ -23,6 +23,22 @@ reshaped, by ``κ σ_t² / 2`` (and the thresholded centroid reads that shift). 
 ``∂u/∂θ`` grows with ``r``, so ``δr ∝ 1/r``: the bias of a small section is the larger.  The
 profile's part across the line (the sheet's width seen across it) only widens the line.
 
+That holds for a stripe equally bright all along.  It is not: the light per unit of arc,
+``w(θ) ∝ E σ_z |∂u/∂z × ∂u/∂θ|`` (the irradiance integrated over the sheet's height times the
+band's image area; Lambertian: the image irradiance is the radiance's), changes along the
+section (the laser's incidence and path, the view's obliquity).  A copy moved by ``(d_r, d_t)``
+crosses the normal where the curve's point ``s = −d_t`` lies, with that point's weight
+``w(1 − g d_t)``, ``g = ∂ ln w / ∂s``; and the blur pulled back into the plane correlates the
+radial and tangential moves (``C_rt ≠ 0`` wherever the view is oblique), so the crossing's
+mean moves by a second term of the same order::
+
+    δr = −C_tt / (2 r) − g C_rt,   g = (1/r) ∂ ln w / ∂θ,
+    C = σ_psf² (JᵀJ)⁻¹ + σ_z² v vᵀ,  J = [∂u/∂r, ∂u/∂θ / r],  v = J⁻¹ ∂u/∂z
+
+(``C_tt`` is the ``σ_t²`` above).  Checked against the exact blurred section for oblique
+affine maps and weights (``tests/design/test_bias.py``); :data:`WEIGHT_GRADIENT` switches the
+second term (the closed form before it was found: ``False``).
+
 What the corrections leave (:class:`~lts360.design.model.Conditions`):
 
 * the §4.4 compensation (translations per view, a free circle) leaves the bias as it is;
@@ -34,14 +50,18 @@ What the corrections leave (:class:`~lts360.design.model.Conditions`):
   bias and the digital twin", twin-corrected |bias| ≤ 1.35 µm of 12.7 µm at Ø6 mm and
   ≤ 0.53 µm of 6.8 µm at Ø12–28 mm).
 
-Not in the closed form: the projection's own curvature (perspective; ≲ r/Z of the bias), an
-intensity gradient along the line, the second-order terms of the blur (``(σ_t/r)⁴``), pixel
-locking (zero-mean over a section) and the renderer's sampling.
+Not in the closed form: the projection's own curvature (perspective; ≲ r/Z of the bias), the
+second-order terms of the blur (``(σ_t/r)⁴``), the thin lens's defocus beyond a blur of its
+variance (a strongly defocused view reads more: STUDIES.md, "The design model's line-centre
+bias"), pixel locking (zero-mean over a section) and the renderer's sampling.
 """
 
 from __future__ import annotations
 
-__all__ = ["TWIN_RESIDUAL_FRACTION", "BIAS_MODELS", "bias_stage"]
+import math
+
+__all__ = ["TWIN_RESIDUAL_FRACTION", "BIAS_MODELS", "WEIGHT_GRADIENT", "bias_stage",
+           "point_bias_mm", "plane_covariance"]
 
 #: The share of the line-centre bias the twin leaves (measured with the true calibration at
 #: 64 spp, STUDIES.md "Line-centre bias and the digital twin": ≤ 0.11 of it at every
@@ -50,17 +70,51 @@ __all__ = ["TWIN_RESIDUAL_FRACTION", "BIAS_MODELS", "bias_stage"]
 TWIN_RESIDUAL_FRACTION = 0.1
 #: The bias corrections of the measurement the model is evaluated for.
 BIAS_MODELS = ("twin", "none")
+#: The stripe's brightness gradient along the section in the bias (the ``− g C_rt`` term).
+WEIGHT_GRADIENT = True
+#: The largest ``|r g|`` (per radian of θ) the bias uses: the log-derivative of the stripe's
+#: light is clipped where it leaves the lit or seen arc (a soft edge, not a gradient).
+MAX_LOG_SLOPE = 5.0
 
 
-def point_bias_mm(dr, r, jr, jt, jz, psf2_px2, sig_z_mm):
+def point_bias_mm(dr, r, jr, jt, jz, psf2_px2, sig_z_mm, g_per_mm=0.0):
     """The closed-form line-centre bias ``δr`` (mm, negative: toward the centre) of each
     element, from its image Jacobians ``jr`` (px/mm), ``jt`` (px/rad), ``jz`` (px/mm), the
-    image's isotropic point-spread variance (px²) and the sheet's σ (mm)."""
+    image's isotropic point-spread variance (px²), the sheet's σ (mm) and the stripe's light
+    log-gradient along the section ``g`` (per mm of arc): ``−C_tt/(2r) − g C_rt``."""
+    c_tt, c_rt = plane_covariance(dr, r, jr, jt, jz, psf2_px2, sig_z_mm)
+    return -0.5 * c_tt / r - g_per_mm * c_rt
+
+
+def plane_covariance(dr, r, jr, jt, jz, psf2_px2, sig_z_mm):
+    """The tangential variance ``C_tt`` and the radial–tangential covariance ``C_rt`` (mm²) of
+    the image's blur (isotropic, ``psf2_px2``) and the sheet's height (σ ``sig_z_mm``, moving
+    the image by ``jz`` per mm) pulled back into the sheet plane through ``J = [jr, jt/r]``."""
     cross_rt = jr[0] * jt[1] - jr[1] * jt[0]
+    inv2 = 1.0 / (cross_rt * cross_rt + 1e-24)
     cross_rz = jr[0] * jz[1] - jr[1] * jz[0]
+    cross_zt = jz[0] * jt[1] - jz[1] * jt[0]
     jr2 = jr[0] * jr[0] + jr[1] * jr[1]
-    tang = psf2_px2 * jr2 + sig_z_mm * sig_z_mm * cross_rz * cross_rz
-    return -0.5 * r * tang / (cross_rt * cross_rt + 1e-24)
+    dot_rt = jr[0] * jt[0] + jr[1] * jt[1]
+    s2 = sig_z_mm * sig_z_mm
+    c_tt = r * r * (psf2_px2 * jr2 + s2 * cross_rz * cross_rz) * inv2
+    # (JᵀJ)⁻¹_rt = −r (jr·jt)/(jr×jt)²; v = J⁻¹ jz = ((jz×jt)/(jr×jt), r (jr×jz)/(jr×jt))
+    c_rt = r * (-psf2_px2 * dot_rt + s2 * cross_zt * cross_rz) * inv2
+    return c_tt, c_rt
+
+
+def _log_slope(e, grid: dict, vw: dict, laser: dict):
+    """``g`` (per mm of arc): the θ-derivative of the log of the stripe's light per unit of
+    arc, ``E σ_z |jz × jt|``, by central differences over the element's θ neighbours, over
+    ``r``; clipped to ``|r g| ≤`` :data:`MAX_LOG_SLOPE`."""
+    o = e.o
+    dr = o.dr
+    jt, jz = vw["jt"], vw["jz"]
+    area = dr.abs(jz[0] * jt[1] - jz[1] * jt[0])
+    lw = dr.log(laser["E_sum"] * laser["sig_sheet_eff"] * area + 1e-30)
+    dth = 2.0 * math.pi / e.n_th
+    slope = (dr.gather(o.F, lw, grid["next"]) - dr.gather(o.F, lw, grid["prev"])) / (2.0 * dth)
+    return dr.clip(slope, -MAX_LOG_SLOPE, MAX_LOG_SLOPE) / e.r
 
 
 def _fit_row(dr, cs: dict):
@@ -94,11 +148,13 @@ def bias_stage(e, views: dict, singles: list, laser: dict, noise: dict, grid: di
         # σ_opt² = sheet-across-line² + defocus² + diffraction²; the pixel box adds 1/12 px².
         psf2 = dr.maximum(vw["sig_opt"] * vw["sig_opt"] - vw["sig_geo"] * vw["sig_geo"], 0.0) \
             + 1.0 / 12.0
-        db = point_bias_mm(dr, e.r, vw["jr"], vw["jt"], vw["jz"], psf2, laser["sig_sheet_eff"])
+        g = _log_slope(e, grid, vw, laser) if WEIGHT_GRADIENT else 0.0
+        db = point_bias_mm(dr, e.r, vw["jr"], vw["jt"], vw["jz"], psf2, laser["sig_sheet_eff"],
+                           g)
         # the two parts, per unit variance: ∂δr/∂σ_psf² (mm/px²) and ∂δr/∂σ_z² (1/mm)
         vw["bias_mm"] = db
-        vw["bias_per_psf2"] = point_bias_mm(dr, e.r, vw["jr"], vw["jt"], vw["jz"], 1.0, 0.0)
-        vw["bias_per_sheet2"] = point_bias_mm(dr, e.r, vw["jr"], vw["jt"], vw["jz"], 0.0, 1.0)
+        vw["bias_per_psf2"] = point_bias_mm(dr, e.r, vw["jr"], vw["jt"], vw["jz"], 1.0, 0.0, g)
+        vw["bias_per_sheet2"] = point_bias_mm(dr, e.r, vw["jr"], vw["jt"], vw["jz"], 0.0, 1.0, g)
         m = vw["m"]
         m_sum = e.case_sum(m)
         mean_view = e.case_sum(m * db) / (m_sum + 1e-30)  # per model case

@@ -361,7 +361,11 @@ def _grid(o: DrJitOps, cond: Conditions, designs: int = 1) -> dict:
     user = d_of_user * n_case + np.tile(np.arange(n_user), designs)
     # Each reported case reads its design's reference (the last model case).
     ref = d_of_user * n_case + (n_case - 1)
+    # each element's neighbours along θ in its own case (wrapping), for derivatives along θ
+    j = np.tile(np.arange(n_th), blocks)
+    base_i = np.repeat(np.arange(blocks), n_th) * n_th
     out = dict(theta=o.F(th), ct=o.F(np.cos(th)), st=o.F(np.sin(th)), r=o.F(cs[:, 0]),
+               next=o.U(base_i + (j + 1) % n_th), prev=o.U(base_i + (j - 1) % n_th),
                cx=o.F(cs[:, 1]), cy=o.F(cs[:, 2]), ci=o.U(block), di=o.U(block // n_case),
                user=o.U(user), ref=o.U(ref), udi=o.U(d_of_user))
     if isinstance(cond.calibration, CalibrationPlan):
