@@ -212,7 +212,7 @@ def _calibration(path: str):
 def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
                 noise_seed: int | None = None, shots: int = 1,
                 placement_mm: float = DEFAULT_PLACEMENT_MM, master: bool = False,
-                bias_model: str = "none"):
+                bias_model: str = "none", memo: dict | None = None):
     """``cal`` with the §4.4 view offsets measured with it on the reference placement
     (``placement_00``), whatever offsets ``cal`` held.  The reference image is noise-free, or
     with ``noise_seed`` has realistic sensor noise and a speckle pattern drawn from it; then
@@ -221,10 +221,45 @@ def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
     (:func:`~lts360.recon.calibration.compensation.master_fit`: per view a radial offset
     too); with ``bias_model="twin"`` its shots are corrected by their twin first
     (:func:`~lts360.twin.twin_corrected_raw`, as the plug-gauge study and ``lts360
-    compensate`` do: the master then sets what the twin leaves)."""
+    compensate`` do: the master then sets what the twin leaves).
+
+    ``memo``: a dict shared by the calls of one trial, all with the same ``cal``: the reference
+    shots are imaged and measured once for the configurations a trial compares (the same
+    images, the same measurements), not once per configuration."""
+    from lts360.recon.calibration.compensation import joint_view_offsets
+
+    key = ("shots", renders, rig_name, float(theta_step_deg), noise_seed, int(shots),
+           float(placement_mm))
+    if memo is not None and key in memo:
+        cal, results = memo[key]
+    else:
+        cal, results = _reference_shots(cal, renders, rig_name, theta_step_deg, noise_seed,
+                                        shots, placement_mm, memo)
+        if memo is not None:
+            memo[key] = (cal, results)
+    if master:
+        from lts360.recon.calibration.compensation import master_fit
+
+        if bias_model == "twin":
+            from lts360.twin import twin_corrected_raw
+
+            grid = _grid(theta_step_deg, placement_mm)
+            results = [twin_corrected_raw(r, cal, grid, _twin(cal)) for r in results]
+        fit = master_fit(results, GAUGE_DIAMETER_MM)
+        return dataclasses.replace(cal, view_offsets_mm=fit.offsets_mm,
+                                   view_radial_offsets_mm=fit.radial_offset_mm,
+                                   view_scales=fit.scale, master=fit.to_dict())
+    offsets = joint_view_offsets(results)
+    return dataclasses.replace(cal, view_offsets_mm=offsets)
+
+
+def _reference_shots(cal, renders: str, rig_name: str, theta_step_deg: float,
+                     noise_seed: int | None, shots: int, placement_mm: float,
+                     memo: dict | None = None):
+    """``cal`` without any compensation, and the reference placement's shots measured with
+    it (:func:`_compensate`'s images: noise-free, or ``shots`` noisy ones from ``noise_seed``)."""
     from types import SimpleNamespace
 
-    from lts360.recon.calibration.compensation import joint_view_offsets
     from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import sensor_image
@@ -240,21 +275,31 @@ def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
         ref, _, _ = sensor_image(rig, SimpleNamespace(radiance_W_m2_sr=Y0, laser_W_m2_sr=L0),
                                  noise="realistic" if noisy else "none", seed=s, speckle=noisy,
                                  speckle_seed=s + 1 if noisy else None)
-        results.append(inverse_triangulate(ref, cal, _grid(theta_step_deg, placement_mm)))
-    if master:
-        from lts360.recon.calibration.compensation import master_fit
+        grid = _grid(theta_step_deg, placement_mm)
+        results.append(inverse_triangulate(ref, cal, grid, plan=_plan(cal, grid, memo)))
+    return cal, results
 
-        if bias_model == "twin":
-            from lts360.twin import twin_corrected_raw
 
-            grid = _grid(theta_step_deg, placement_mm)
-            results = [twin_corrected_raw(r, cal, grid, _twin(cal)) for r in results]
-        fit = master_fit(results, GAUGE_DIAMETER_MM)
-        return dataclasses.replace(cal, view_offsets_mm=fit.offsets_mm,
-                                   view_radial_offsets_mm=fit.radial_offset_mm,
-                                   view_scales=fit.scale, master=fit.to_dict())
-    offsets = joint_view_offsets(results)
-    return dataclasses.replace(cal, view_offsets_mm=offsets)
+#: The fields of a calibration that only move its measured points afterwards (§4.4 offsets,
+#: mastering): an inverse-triangulation plan does not depend on them.
+_COMPENSATION_FIELDS = ("view_offsets_mm", "view_radial_offsets_mm", "view_scales", "master")
+
+
+def _plan(cal, grid, memo: dict | None):
+    """:func:`~lts360.recon.triangulation.inverse.plan_inverse` for ``cal`` and ``grid``, as
+    ``inverse_triangulate`` makes it by default; with ``memo``, made once for the
+    calibrations of one trial that differ only by their compensation (the same geometry
+    objects: a drawn calibration and its compensated forms) and handed to each."""
+    from lts360.recon.triangulation.inverse import plan_inverse
+
+    base = memo.get(("plan", id(grid))) if memo is not None else None
+    if base is None or base.grid is not grid or any(
+            getattr(base.cal, f.name) is not getattr(cal, f.name)
+            for f in dataclasses.fields(cal) if f.name not in _COMPENSATION_FIELDS):
+        base = plan_inverse(cal, grid, precompute=False)
+        if memo is not None:
+            memo[("plan", id(grid))] = base
+    return base if base.cal is cal else dataclasses.replace(base, cal=cal)
 
 
 def _twin(cal):
@@ -282,6 +327,7 @@ def _uncompensated(path: str):
                                view_scales={}, master={})
 
 
+@functools.lru_cache(maxsize=8)
 def _grid(theta_step_deg: float, placement_mm: float = DEFAULT_PLACEMENT_MM):
     """The fixed band about the gauge's radius: ±0.5 mm at the nominal placements, widened by
     the placement radius beyond them."""
@@ -327,8 +373,11 @@ def _nominal_radii(frame_dir: str, cal_path: str, renders: str, rig_name: str,
 
 
 def _trial_calibration(p: dict, vary: set, seeds, *, compensate: bool, master: bool,
-                       bias_model: str):
-    """The calibration a trial measures with: drawn or nominal, compensated as configured."""
+                       bias_model: str, memo: dict | None = None):
+    """The calibration a trial measures with: drawn or nominal, compensated as configured.
+
+    ``memo``: a dict the calls of one trial share (the same ``p``, ``vary``, ``seeds``): the
+    drawn calibration and its reference shots are made once for all its configurations."""
     from lts360.recon.calibration.uncertainty import sample_calibration
 
     pl_mm = float(p.get("placement_mm", DEFAULT_PLACEMENT_MM))
@@ -341,13 +390,17 @@ def _trial_calibration(p: dict, vary: set, seeds, *, compensate: bool, master: b
     if vary & {"calibration", "compensation"}:
         # A new calibration is followed by a new §4.4 compensation, as in the lab: measure
         # the gauge at the reference placement with it and put the views on one circle.
-        cal = _calibration(p["calibration"])
-        if "calibration" in vary:
-            cal = sample_calibration(cal, np.random.default_rng(seeds[2]))
-        return _compensate(cal, p["renders"], p["rig"], step,
+        memo = {} if memo is None else memo
+        if "drawn" not in memo:
+            cal = _calibration(p["calibration"])
+            if "calibration" in vary:
+                cal = sample_calibration(cal, np.random.default_rng(seeds[2]))
+            memo["drawn"] = cal
+        return _compensate(memo["drawn"], p["renders"], p["rig"], step,
                            noise_seed=int(seeds[4]) if "compensation" in vary else None,
                            shots=int(p.get("compensation_shots", 1)), placement_mm=pl_mm,
-                           master=master, bias_model=bias_model if master else "none")
+                           master=master, bias_model=bias_model if master else "none",
+                           memo=memo)
     return _nominal_calibration(p["calibration"], p["renders"], p["rig"], step, pl_mm, master,
                                 bias_model if master else "none")  # the same procedure, once
 
@@ -367,14 +420,14 @@ def _radius_error_um(result, dT: float) -> tuple[float, float, int]:
     return float(y), float(r.std() * 1e3), int(len(pts))
 
 
-def _measure(image, cal, grid, bias_model: str):
+def _measure(image, cal, grid, bias_model: str, memo: dict | None = None):
     """The section in ``image`` measured with ``cal`` (compensated if it holds offsets), and
     with ``bias_model="twin"`` corrected by its twin; also the uncorrected measurement and the
     mean bias the twin removed over the corrected points (µm; NaN without the twin)."""
     from lts360.recon.triangulation.inverse import inverse_triangulate
 
     comp = bool(cal.view_offsets_mm)
-    plain = inverse_triangulate(image, cal, grid, compensate=comp)
+    plain = inverse_triangulate(image, cal, grid, compensate=comp, plan=_plan(cal, grid, memo))
     if bias_model == "none":
         return plain, plain, np.nan
     from lts360.twin import twin_corrected
@@ -416,9 +469,10 @@ def mc_trial(trial: Trial) -> TrialOutput:
     if bias_model not in ("none", "twin"):
         raise ValueError(f"bias_model must be none or twin, got {bias_model!r}")
     grid = _grid(step, pl_mm)
+    memo: dict = {}  # the draw's calibration and reference shots, shared by its steps
     cal = _trial_calibration(p, vary, seeds, compensate=compensate, master=master,
-                             bias_model=bias_model)
-    out, plain, twin_bias = _measure(image, cal, grid, bias_model)
+                             bias_model=bias_model, memo=memo)
+    out, plain, twin_bias = _measure(image, cal, grid, bias_model, memo)
     offset = _offset_mm(frame_dir)
     dT = float(np.random.default_rng(seeds[3]).uniform(-DELTA_T_K, DELTA_T_K)) \
         if "temperature" in vary else 0.0
@@ -439,8 +493,10 @@ def mc_trial(trial: Trial) -> TrialOutput:
             if key == ours:
                 values[f"y_{key}_um"] = y
                 continue
-            c = _trial_calibration(p, vary, seeds, compensate=comp, master=mast, bias_model=bias)
-            values[f"y_{key}_um"] = _radius_error_um(_measure(image, c, grid, bias)[0], dT)[0]
+            c = _trial_calibration(p, vary, seeds, compensate=comp, master=mast, bias_model=bias,
+                                   memo=memo)
+            values[f"y_{key}_um"] = _radius_error_um(_measure(image, c, grid, bias, memo)[0],
+                                                     dT)[0]
     return TrialOutput(values=values)
 
 
