@@ -235,6 +235,32 @@ def test_determinism_and_fixed_pattern_per_camera():
                           S.expose(mu, s, rng=np.random.default_rng(11)))
 
 
+@pytest.mark.parametrize("sensor", [SensorModel(), sensor12(prnu_fraction=0.1)],
+                         ids=["8bit", "12bit"])
+def test_expose_held_is_expose_of_the_dense_image(sensor):
+    """A frame whose light is held by a few pixels, given as those pixels: the same image as
+    the dense array's, bit for bit, with and without noise (the same draws); bad input refused."""
+    rng = np.random.default_rng(3)
+    mu = np.zeros((37, 53))
+    idx = np.sort(rng.choice(mu.size, 300, replace=False))
+    mu.flat[idx] = rng.uniform(0.0, 3.0 * sensor.full_well_e, idx.size)
+    mu.flat[idx[:5]] = 0.0                        # listed pixels may hold no light
+    for noise in (False, True):
+        for t in (None, 2e-3):
+            dense = S.expose(mu, sensor, rng=5, noise=noise, exposure_time_s=t)
+            held = S.expose_held(mu.shape, idx, mu.flat[idx], sensor, rng=5, noise=noise,
+                                 exposure_time_s=t)
+            assert held.dtype == dense.dtype and np.array_equal(held, dense)
+    assert np.array_equal(S.expose_held(mu.shape, idx, mu.flat[idx], sensor, rng=5, workers=1),
+                          S.expose(mu, sensor, rng=5))
+    with pytest.raises(ValueError, match="sorted"):
+        S.expose_held(mu.shape, idx[::-1], mu.flat[idx[::-1]], sensor, rng=5)
+    with pytest.raises(ValueError, match="differ in length"):
+        S.expose_held(mu.shape, idx, mu.flat[idx[:-1]], sensor, rng=5)
+    with pytest.raises(ValueError, match="finite and >= 0"):
+        S.expose_held(mu.shape, idx[:1], [-1.0], sensor, rng=5)
+
+
 def test_rng_validation():
     with pytest.raises(ValueError, match="rng must be"):
         S.expose(flat(1.0), SensorModel(), rng="seed")
