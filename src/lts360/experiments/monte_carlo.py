@@ -280,22 +280,37 @@ def _reference_shots(cal, renders: str, rig_name: str, theta_step_deg: float,
     return cal, results
 
 
-#: The fields of a calibration that only move its measured points afterwards (§4.4 offsets,
-#: mastering): an inverse-triangulation plan does not depend on them.
-_COMPENSATION_FIELDS = ("view_offsets_mm", "view_radial_offsets_mm", "view_scales", "master")
+#: The fields of a calibration an inverse-triangulation plan does not read: the §4.4 offsets
+#: and the mastering (they move the measured points afterwards), the uncertainties, the optics.
+_NOT_PLANNED = ("view_offsets_mm", "view_radial_offsets_mm", "view_scales", "master",
+                "uncertainty", "optics")
+
+
+def _same(a, b) -> bool:
+    """Exact equality of calibration values (arrays bit for bit, containers and dataclasses
+    field by field)."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return np.shape(a) == np.shape(b) and np.array_equal(a, b)
+    if dataclasses.is_dataclass(a) and type(a) is type(b):
+        return all(_same(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(a))
+    if isinstance(a, (tuple, list)) and isinstance(b, (tuple, list)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    return type(a) is type(b) and a == b
 
 
 def _plan(cal, grid, memo: dict | None):
     """:func:`~lts360.recon.triangulation.inverse.plan_inverse` for ``cal`` and ``grid``, as
     ``inverse_triangulate`` makes it by default; with ``memo``, made once for the
-    calibrations of one trial that differ only by their compensation (the same geometry
-    objects: a drawn calibration and its compensated forms) and handed to each."""
+    calibrations of one trial whose geometry is the same, value for value (a drawn calibration
+    and its compensated forms: only their offsets and mastering differ), and handed to each."""
     from lts360.recon.triangulation.inverse import plan_inverse
 
     base = memo.get(("plan", id(grid))) if memo is not None else None
-    if base is None or base.grid is not grid or any(
-            getattr(base.cal, f.name) is not getattr(cal, f.name)
-            for f in dataclasses.fields(cal) if f.name not in _COMPENSATION_FIELDS):
+    if base is None or base.grid is not grid or not all(
+            _same(getattr(base.cal, f.name), getattr(cal, f.name))
+            for f in dataclasses.fields(cal) if f.name not in _NOT_PLANNED):
         base = plan_inverse(cal, grid, precompute=False)
         if memo is not None:
             memo[("plan", id(grid))] = base
