@@ -1,7 +1,9 @@
 """Render what is measured: the full frame and the pixel support side by side.
 
 Paper rig, plug gauge, 1280×1024, ``llvm_ad_mono`` by default.  Rows (wall clock, median of
-the warm calls; the first call, which compiles, apart):
+the warm calls; the first call, which compiles, apart; ``cpu_median_s`` beside it: the
+process's CPU time of a call, all threads — the work done, which other jobs sharing the machine
+disturb far less than the wall clock):
 
 * ``frame_realistic_16``: :func:`simulate_frame` at 16 spp with realistic noise and speckle,
   the default (the pixel support, when the code has one);
@@ -98,13 +100,15 @@ def main(argv=None) -> None:
         t0 = time.perf_counter()
         fns[name]()
         first = time.perf_counter() - t0
-        warm = []
+        warm, cpu = [], []
         for _ in range(max(1, args.repeats)):
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             fns[name]()
             warm.append(time.perf_counter() - t0)
+            cpu.append(time.process_time() - c0)
         out["rows"][name] = {"first_s": round(first, 4), "median_s": round(statistics.median(warm), 4),
-                             "warm_s": [round(w, 4) for w in warm]}
+                             "warm_s": [round(w, 4) for w in warm],
+                             "cpu_median_s": round(statistics.median(cpu), 4)}
         print(name, out["rows"][name], flush=True)
     out["load_average_after"] = os.getloadavg()
     text = json.dumps(out, indent=2)
