@@ -71,7 +71,11 @@ cores while other work shared them): a trial with a drawn calibration, its maste
 compensation and the measurement 0.45–0.67 s, the twin's correction of one section
 0.75–1.17 s more; a default trial corrects two sections (its own and the master's reference
 shot) and, with ``steps``, measures two more configurations: 100 such trials took 4 min on two
-worker processes (STUDIES.md, "Monte Carlo uncertainty").
+worker processes (STUDIES.md, "Monte Carlo uncertainty").  The configurations of one draw
+share its drawn calibration, its reference shots (imaged and measured once, not once per
+configuration) and one inverse plan (they differ only by compensation, applied to the
+measured points afterwards): a default trial then costs 1.06–1.10 s of CPU against
+1.79–1.80 s before (BENCHMARKS.md), two thirds of it the twin's two corrections.
 
 With ``steps`` (default on) each trial of the full Monte Carlo also measures its image with
 the other configurations of :data:`MC_STEPS` on the same draw (the same image, drawn
