@@ -377,6 +377,8 @@ def _expose(shape: tuple[int, ...], index, mu: np.ndarray, sensor: SensorModel, 
         at = index[a:b] - sl.start * row
         v = mu[a:b] * fpn.prnu_gain[sl].reshape(-1)[at] if fpn is not None else mu[a:b].copy()
         v += mu_d
+        if noise and mu_d <= cap:  # the cap only touches the lit pixels (a dark one is mu_d)
+            np.minimum(v, cap, out=v)
         lam.reshape(-1)[at] = v
         return lam
 
@@ -387,11 +389,14 @@ def _expose(shape: tuple[int, ...], index, mu: np.ndarray, sensor: SensorModel, 
         lam = mean_charge(sl)
         if noise:
             gen = gens[i]
-            np.minimum(lam, cap, out=lam)
+            if index is None or mu_d > cap:
+                np.minimum(lam, cap, out=lam)
             a = gen.poisson(lam).astype(np.float64)
             np.minimum(a, full_well, out=a)
             if sigma_read > 0:
-                a += sigma_read * gen.standard_normal(a.shape)
+                z = gen.standard_normal(a.shape)
+                z *= sigma_read
+                a += z
         else:
             a = np.minimum(lam, full_well, out=lam)
         if fpn is not None:
