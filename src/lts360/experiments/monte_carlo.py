@@ -112,7 +112,7 @@ from lts360.experiments.gauge_study import (
     _step_key,
     gauge_placements,
 )
-from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study
+from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study, study_pool
 from lts360.folders import is_frame, read_frame_meta
 
 __all__ = ["INPUTS", "MC_STEPS", "mc_trial", "run_monte_carlo_study", "coverage_interval",
@@ -546,12 +546,13 @@ def _batch_seed(seed: int, name: str, h: int) -> int:
 
 
 def _run_batches(out: Path, name: str, base: dict, *, seed: int, batch: int, max_batches: int,
-                 adaptive: bool, n_dig: int, workers, dask_address, say) -> tuple[np.ndarray, dict]:
+                 adaptive: bool, n_dig: int, workers, dask_address, pool,
+                 say) -> tuple[np.ndarray, dict]:
     batches, info = [], {}
     for h in range(max_batches):
         trials = plan_trials([dict(base)] * batch, _batch_seed(seed, name, h))
         ds = run_study(out / name / f"batch_{h:03d}", trials, mc_trial, name=f"{name}-{h}",
-                       workers=workers, dask_address=dask_address, progress=True)
+                       workers=workers, dask_address=dask_address, progress=True, pool=pool)
         y = ds["y_um"].values
         batches.append(y[np.isfinite(y)])
         if adaptive:
@@ -561,6 +562,30 @@ def _run_batches(out: Path, name: str, base: dict, *, seed: int, batch: int, max
             if stable:
                 break
     return np.concatenate(batches), info
+
+
+def _run_all_batches(out: Path, base: dict, kw: dict, *, trials: int, batch: int,
+                     adaptive: bool, n_dig: int, steps: bool, compensate: bool, master: bool,
+                     bias_model: str, sensitivity_trials: int) -> tuple[np.ndarray, dict, dict]:
+    """The full Monte Carlo's batches and the one-input-at-a-time runs: (y, summary, budget)."""
+    full = dict(base, vary="all", steps=True) if steps else dict(base, vary="all")
+    y, info = _run_batches(out, "mc", full, batch=batch,
+                           max_batches=(10_000 if adaptive else max(1, math.ceil(trials / batch))),
+                           adaptive=adaptive, n_dig=n_dig, **kw)
+    lo, hi = coverage_interval(y)
+    summary = {"M": int(len(y)), "mean_um": float(y.mean()), "u_um": float(y.std(ddof=1)),
+               "interval95_um": [lo, hi], "adaptive": adaptive, "adaptive_info": info,
+               "configuration": _config_label(compensate, master and compensate, bias_model),
+               "ours": _step_key(compensate, master and compensate, bias_model) or ""}
+    budget = {}
+    for name in INPUTS:
+        if name == "compensation" and not compensate:
+            continue
+        yi, _ = _run_batches(out, f"only-{name}", dict(base, vary=name), batch=sensitivity_trials,
+                             max_batches=1, adaptive=False, n_dig=n_dig, **kw)
+        budget[name] = {"u_um": float(yi.std(ddof=1)), "mean_um": float(yi.mean()),
+                        "M": int(len(yi))}
+    return y, summary, budget
 
 
 def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive: bool = False,
@@ -614,24 +639,13 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
         base["bias_model"] = "twin"
     if workers is None and dask_address is None:
         workers = 2
-    kw = dict(seed=seed, workers=workers, dask_address=dask_address, say=say)
-    full = dict(base, vary="all", steps=True) if steps else dict(base, vary="all")
-    y, info = _run_batches(out, "mc", full, batch=batch,
-                           max_batches=(10_000 if adaptive else max(1, math.ceil(trials / batch))),
-                           adaptive=adaptive, n_dig=n_dig, **kw)
-    lo, hi = coverage_interval(y)
-    summary = {"M": int(len(y)), "mean_um": float(y.mean()), "u_um": float(y.std(ddof=1)),
-               "interval95_um": [lo, hi], "adaptive": adaptive, "adaptive_info": info,
-               "configuration": _config_label(compensate, master and compensate, bias_model),
-               "ours": _step_key(compensate, master and compensate, bias_model) or ""}
-    budget = {}
-    for name in INPUTS:
-        if name == "compensation" and not compensate:
-            continue
-        yi, _ = _run_batches(out, f"only-{name}", dict(base, vary=name), batch=sensitivity_trials,
-                             max_batches=1, adaptive=False, n_dig=n_dig, **kw)
-        budget[name] = {"u_um": float(yi.std(ddof=1)), "mean_um": float(yi.mean()),
-                        "M": int(len(yi))}
+    with study_pool(workers, dask_address) as pool:  # one pool for every batch of the study
+        kw = dict(seed=seed, workers=workers, dask_address=dask_address, pool=pool, say=say)
+        y, summary, budget = _run_all_batches(out, base, kw, trials=trials, batch=batch,
+                                              adaptive=adaptive, n_dig=n_dig, steps=steps,
+                                              compensate=compensate, master=master,
+                                              bias_model=bias_model,
+                                              sensitivity_trials=sensitivity_trials)
     summary["budget"] = budget
     summary["gum_u_um"] = float(math.sqrt(sum(b["u_um"] ** 2 for b in budget.values())))
     summary["ranking"] = sorted(budget, key=lambda k: -budget[k]["u_um"])
