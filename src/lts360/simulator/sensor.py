@@ -75,6 +75,12 @@ _N_BLOCKS = 8
 #: is < 1e-12 for full_well >= 100), and the cap keeps huge radiances from overflowing.
 _LAMBDA_CAP_FACTOR = 2.0
 _LAMBDA_CAP_E = 1000.0
+#: Largest mean charge shared by many pixels (the dark current's, in pixels without light) that
+#: is drawn as one Poisson total scattered over the pixels (:func:`_poisson_draws`); above it
+#: (or below 0, to turn it off) every pixel is drawn alone.  The scatter is cheaper while the
+#: total is small: 0.7 against 2.3 ms for 164 000 pixels at a mean of 0.05 e⁻, 3.8 against 7.5
+#: at 5 e⁻.
+_SCATTER_MAX_MEAN = 8.0
 
 
 
@@ -391,7 +397,7 @@ def _expose(shape: tuple[int, ...], index, mu: np.ndarray, sensor: SensorModel, 
             gen = gens[i]
             if index is None or mu_d > cap:
                 np.minimum(lam, cap, out=lam)
-            a = gen.poisson(lam).astype(np.float64)
+            a = _poisson_draws(gen, lam, mu_d)
             np.minimum(a, full_well, out=a)
             if sigma_read > 0:
                 z = gen.standard_normal(a.shape)
@@ -409,6 +415,29 @@ def _expose(shape: tuple[int, ...], index, mu: np.ndarray, sensor: SensorModel, 
 
     _run_blocks(block, len(blocks), workers)
     return out
+
+
+def _poisson_draws(gen: np.random.Generator, lam: np.ndarray, shared: float) -> np.ndarray:
+    """Independent ``Poisson(lam)`` draws (float64, the shape of ``lam``).
+
+    Where the pixels mostly share the mean ``shared`` (those without light: the dark current's
+    charge) and it is at most :data:`_SCATTER_MAX_MEAN`, all ``N`` pixels first get the counts
+    of a ``Poisson(N · shared)`` total of charges each put in a uniformly drawn pixel
+    (``integers`` + ``bincount``): by the splitting property of the Poisson process these
+    counts are exactly independent ``Poisson(shared)`` draws, one per pixel.  The pixels whose
+    mean differs are then drawn alone and replace theirs (independent of the rest).  The
+    distribution is that of one ``gen.poisson(lam)``; the realisation is another."""
+    n = lam.size
+    if not 0.0 <= shared <= _SCATTER_MAX_MEAN:
+        return gen.poisson(lam).astype(np.float64)
+    flat = lam.reshape(-1)
+    other = np.flatnonzero(flat != shared)
+    if 2 * other.size > n:  # mostly lit: one draw per pixel costs less
+        return gen.poisson(lam).astype(np.float64)
+    total = int(gen.poisson(shared * n))
+    a = np.bincount(gen.integers(0, n, size=total), minlength=n).astype(np.float64)
+    a[other] = gen.poisson(flat[other])
+    return a.reshape(lam.shape)
 
 
 def _expected_into(out: np.ndarray, index: np.ndarray, mu: np.ndarray, *, mu_d: float,
