@@ -1,6 +1,11 @@
 """Monte Carlo trials on the CPU: the wall time of ``mc_trial`` (sensor noise, speckle,
 calibration draw, inverse triangulation) per trial, for an estimate of a 1000-trial run.
 
+The trials are the study's main run as ``lts360 study monte-carlo`` makes them by default:
+every input varying, §4.4 + master + twin, and the other configurations of each draw
+(``steps``); ``--no-master``, ``--bias-model none`` and ``--no-steps`` as the study's options
+(the setup's own ``base.json`` is not changed by them).
+
 Set-up (``--setup DIR``): the study's placement renders and the true calibration, as
 ``benchmarks/gpu_check.py``'s ``mc_setup``; it is written once and reused, so that two
 checkouts ("before" and "after", ``PYTHONPATH`` at each ``src``) time their trials on the same
@@ -8,7 +13,8 @@ renders.  Trials run one after another in this process (one core): the estimate 
 trials on ``c`` cores is ``1000 × median / c`` (the study's pool runs one trial per core).
 
 Usage: python benchmarks/bench_mc_trial.py --setup DIR [--placements 2] [--trials 8]
-       [--theta-step-deg 0.5] [--json OUT]
+       [--theta-step-deg 0.5] [--no-master] [--bias-model twin|none] [--no-steps]
+       [--json OUT]
 """
 
 from __future__ import annotations
@@ -29,6 +35,9 @@ def main(argv=None) -> None:
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--trials", type=int, default=8)
     ap.add_argument("--theta-step-deg", type=float, default=0.5)
+    ap.add_argument("--no-master", dest="master", action="store_false")
+    ap.add_argument("--bias-model", choices=("twin", "none"), default="twin")
+    ap.add_argument("--no-steps", dest="steps", action="store_false")
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
 
@@ -54,17 +63,28 @@ def main(argv=None) -> None:
         base["setup_s"] = time.perf_counter() - t0
         base_file.write_text(json.dumps(base, indent=2))
     params = {k: v for k, v in base.items() if k != "setup_s"}
+    params.update(master=args.master, steps=args.steps, bias_model=args.bias_model)
+    if args.bias_model == "twin":
+        from lts360.recon.model import load_calibration
+        from lts360.twin.rig import twin_design
+
+        twin_design(load_calibration(params["calibration"]))  # refused here without optics
     trials = plan_trials([dict(params, theta_step_deg=args.theta_step_deg)] * (args.trials + 1),
                          seed=0)
-    times = []
+    times, cpu = [], []
     for t in trials:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         mc_trial(t)
         times.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
     cores = os.cpu_count() or 1
     med = statistics.median(times[1:])
     out = {"code": str(Path(lts360.__file__).resolve().parents[2]), "first_s": times[0],
            "median_s": med, "warm_s": times[1:], "estimate_1000_s": 1000 * med / cores,
+           "cpu_median_s": statistics.median(cpu[1:]),
+           "estimate_1000_cpu_s": 1000 * statistics.median(cpu[1:]) / cores,
+           "configuration": {"master": args.master, "bias_model": args.bias_model,
+                             "steps": args.steps},
            "cores": cores, "load_average": os.getloadavg(), "setup_s": base.get("setup_s")}
     text = json.dumps(out, indent=2)
     print(text)

@@ -1,7 +1,9 @@
 """Render what is measured: the full frame and the pixel support side by side.
 
 Paper rig, plug gauge, 1280×1024, ``llvm_ad_mono`` by default.  Rows (wall clock, median of
-the warm calls; the first call, which compiles, apart):
+the warm calls; the first call, which compiles, apart; ``cpu_median_s`` beside it: the
+process's CPU time of a call, all threads — the work done, which other jobs sharing the machine
+disturb far less than the wall clock):
 
 * ``frame_realistic_16``: :func:`simulate_frame` at 16 spp with realistic noise and speckle,
   the default (the pixel support, when the code has one);
@@ -14,6 +16,9 @@ the warm calls; the first call, which compiles, apart):
 * ``frame_realistic_16_reused``: the first row on a scene built once (``SceneCache``: the
   scene and the support are looked up, as a study's repeated frames do);
 * ``render_full_16``: :func:`render_radiance`, the full frame alone;
+* ``sensor_realistic_16``: the sensor alone (:func:`sensor_image`, realistic noise, no
+  speckle) on the render of one 16-spp frame: photo-electrons, the Poisson and read-noise
+  draws and the conversion to digital values;
 * ``speckle_keyed``: the frame's speckle, :func:`speckle_on_tiles` on the laser pixels of a
   16-spp frame (the code's way since the speckle is keyed to the pixel);
 * ``speckle_bbox``: one :func:`speckle_pattern` on the same pixels' bounding box plus 16 px,
@@ -39,7 +44,8 @@ import time
 from pathlib import Path
 
 ROWS = ("frame_realistic_16", "frame_realistic_16_moved", "frame_realistic_16_full", "frame_realistic_16_support",
-        "frame_noise_free_256", "frame_noise_free_256_support", "frame_realistic_16_reused", "render_full_16", "speckle_keyed", "speckle_bbox")
+        "frame_noise_free_256", "frame_noise_free_256_support", "frame_realistic_16_reused", "render_full_16", "sensor_realistic_16", "speckle_keyed",
+        "speckle_bbox")
 
 
 def main(argv=None) -> None:
@@ -87,6 +93,13 @@ def main(argv=None) -> None:
             rig, obj, spp=256, seed=1, noise="none", support="geometric")
         fns["frame_realistic_16_reused"] = lambda: simulate_frame(
             rig, obj, spp=16, seed=1, noise="realistic", scenes=cache)
+    if "sensor_realistic_16" in args.rows.split(","):
+        from lts360.simulator import frame as frame_mod
+
+        if hasattr(frame_mod, "sensor_image"):
+            res = simulate_frame(rig, obj, spp=16, seed=1, noise="none").render
+            fns["sensor_realistic_16"] = lambda: frame_mod.sensor_image(
+                rig, res, noise="realistic", seed=1, speckle=False)
     if {"speckle_keyed", "speckle_bbox"} & set(args.rows.split(",")):
         _speckle_rows(fns, rig, obj, simulate_frame)
     out = {"code": str(src), "commit": commit, "variant": args.variant,
@@ -98,13 +111,15 @@ def main(argv=None) -> None:
         t0 = time.perf_counter()
         fns[name]()
         first = time.perf_counter() - t0
-        warm = []
+        warm, cpu = [], []
         for _ in range(max(1, args.repeats)):
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             fns[name]()
             warm.append(time.perf_counter() - t0)
+            cpu.append(time.process_time() - c0)
         out["rows"][name] = {"first_s": round(first, 4), "median_s": round(statistics.median(warm), 4),
-                             "warm_s": [round(w, 4) for w in warm]}
+                             "warm_s": [round(w, 4) for w in warm],
+                             "cpu_median_s": round(statistics.median(cpu), 4)}
         print(name, out["rows"][name], flush=True)
     out["load_average_after"] = os.getloadavg()
     text = json.dumps(out, indent=2)

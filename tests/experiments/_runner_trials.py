@@ -38,6 +38,13 @@ def expected_sum_deg(params) -> float:
     return params["alpha_deg"] + 0.5 * params["beta_deg"]
 
 
+def pid_trial(trial):
+    """:func:`noisy_trial` plus the id of the process that ran it (``pid``)."""
+    out = noisy_trial(trial)
+    return TrialOutput(values={**out.values, "pid": os.getpid()}, dims=out.dims,
+                       coords=out.coords)
+
+
 def crashes_on_trial_3(trial):
     """Like :func:`noisy_trial`, but trial 3 raises (a renderer crash, say)."""
     if trial.index == 3:

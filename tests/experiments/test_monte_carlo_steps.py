@@ -73,3 +73,45 @@ def test_a_twin_corrected_trial_differs_from_the_plain_one_by_the_twins_correcti
     assert float(steps["y_c44_master_twin_um"]) == float(steps["y_um"])
     assert float(steps["y_c44_um"]) == pytest.approx(float(plain["y_um"]), abs=1e-9)
     assert abs(float(steps["y_c44_master_um"]) - float(steps["y_c44_um"])) > 1e-3
+
+
+def test_a_trials_configurations_share_one_plan_and_measure_as_with_their_own(
+        tmp_path, truth_calibration):
+    """The configurations of a draw differ only by their compensation (§4.4 offsets,
+    mastering), which moves the measured points afterwards: they share one inverse plan, and
+    each measures bit for bit as with a plan of its own; another geometry gets its own plan."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from lts360.experiments.monte_carlo import (
+        _grid,
+        _placement,
+        _plan,
+        _render_placements,
+        _uncompensated,
+    )
+    from lts360.recon.triangulation.inverse import inverse_triangulate
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.frame import sensor_image
+
+    renders = _render_placements(tmp_path, 1, rig="paper", seed=3, spp=4, say=lambda *_: None)
+    Y, L, _ = _placement(str(renders / "placement_00"))
+    image, _, _ = sensor_image(load_rig("paper"),
+                               SimpleNamespace(radiance_W_m2_sr=Y, laser_W_m2_sr=L), noise="none")
+    base = _uncompensated(str(truth_calibration))
+    names = base.mirror_names
+    comp = dataclasses.replace(base, view_offsets_mm={n: np.array([0.01, -0.02]) for n in names},
+                               view_radial_offsets_mm={n: 0.003 for n in names})
+    grid, memo = _grid(2.0), {}
+    for cal, flag in ((base, False), (comp, True)):
+        shared = inverse_triangulate(image, cal, grid, compensate=flag, plan=_plan(cal, grid, memo))
+        own = inverse_triangulate(image, cal, grid, compensate=flag)
+        for n, v in own.views.items():
+            assert np.array_equal(shared.views[n].r_mm, v.r_mm, equal_nan=True)
+            assert np.array_equal(shared.views[n].valid, v.valid)
+    assert np.any(np.isfinite(own.views[names[0]].r_mm))
+    plans = [v for k, v in memo.items() if k[0] == "plan"]
+    assert len(plans) == 1 and plans[0].cal is base
+    other = dataclasses.replace(comp, K=comp.K * np.array([[1.001], [1.0], [1.0]]))
+    p = _plan(other, grid, memo)
+    assert p.cal is other and memo[("plan", id(grid))].cal is other  # made anew for it

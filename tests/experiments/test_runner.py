@@ -26,6 +26,7 @@ from lts360.experiments.runner import (
     grid_params,
     plan_trials,
     run_study,
+    study_pool,
     to_grid,
     trial_path,
 )
@@ -133,6 +134,36 @@ def test_process_pool_gives_the_sequential_results(tmp_path):
     sequential = run(tmp_path / "one")
     pooled = run(tmp_path / "two", workers=2)
     xr.testing.assert_identical(pooled, sequential)
+
+
+@pytest.mark.slow
+def test_one_pool_serves_every_call_of_a_study(tmp_path):
+    """The batches of a study share one pool: the same two worker processes run every trial of
+    three calls (one failing in between), with the sequential run's values."""
+    with study_pool(workers=2) as pool:
+        first = run(tmp_path / "a", fn=trials_mod.pid_trial, workers=2, pool=pool)
+        with pytest.raises(TrialError, match="trial 3 of study 'small' failed"):
+            run(tmp_path / "fails", fn=trials_mod.crashes_on_trial_3, workers=2, pool=pool)
+        second = run(tmp_path / "b", fn=trials_mod.pid_trial, workers=2, pool=pool)
+    pids = set(first["pid"].values.tolist()) | set(second["pid"].values.tolist())
+    assert len(pids) <= 2 and os.getpid() not in pids
+    assert pool._processes is None or not pool._processes, "the pool was not shut down"
+    sequential = run(tmp_path / "one")
+    xr.testing.assert_identical(first.drop_vars("pid"), sequential)
+    xr.testing.assert_identical(second.drop_vars("pid"), sequential)
+
+
+def test_study_pool_is_local_processes_only(tmp_path):
+    with study_pool(workers=1) as pool:
+        assert pool is None
+    with study_pool(dask_address="tcp://127.0.0.1:1") as pool:
+        assert pool is None
+    with pytest.raises(ValueError, match="workers must be an int"):
+        with study_pool(workers=0):
+            pass
+    with pytest.raises(ValueError, match="either pool or dask_address"):
+        run(tmp_path, workers=None, dask_address="tcp://127.0.0.1:1", pool=object())
+    assert not (tmp_path / "plan.json").exists()
 
 
 def test_resume_after_kill_9(tmp_path):

@@ -235,6 +235,79 @@ def test_determinism_and_fixed_pattern_per_camera():
                           S.expose(mu, s, rng=np.random.default_rng(11)))
 
 
+@pytest.mark.parametrize("sensor", [SensorModel(), sensor12(prnu_fraction=0.1)],
+                         ids=["8bit", "12bit"])
+def test_expose_held_is_expose_of_the_dense_image(sensor):
+    """A frame whose light is held by a few pixels, given as those pixels: the same image as
+    the dense array's, bit for bit, with and without noise (the same draws); bad input refused."""
+    rng = np.random.default_rng(3)
+    mu = np.zeros((37, 53))
+    idx = np.sort(rng.choice(mu.size, 300, replace=False))
+    mu.flat[idx] = rng.uniform(0.0, 3.0 * sensor.full_well_e, idx.size)
+    mu.flat[idx[:5]] = 0.0                        # listed pixels may hold no light
+    for noise in (False, True):
+        for t in (None, 2e-3):
+            dense = S.expose(mu, sensor, rng=5, noise=noise, exposure_time_s=t)
+            held = S.expose_held(mu.shape, idx, mu.flat[idx], sensor, rng=5, noise=noise,
+                                 exposure_time_s=t)
+            assert held.dtype == dense.dtype and np.array_equal(held, dense)
+    assert np.array_equal(S.expose_held(mu.shape, idx, mu.flat[idx], sensor, rng=5, workers=1),
+                          S.expose(mu, sensor, rng=5))
+    with pytest.raises(ValueError, match="sorted"):
+        S.expose_held(mu.shape, idx[::-1], mu.flat[idx[::-1]], sensor, rng=5)
+    with pytest.raises(ValueError, match="differ in length"):
+        S.expose_held(mu.shape, idx, mu.flat[idx[:-1]], sensor, rng=5)
+    with pytest.raises(ValueError, match="finite and >= 0"):
+        S.expose_held(mu.shape, idx[:1], [-1.0], sensor, rng=5)
+
+
+@pytest.mark.parametrize("mu_d", [0.05, 0.8, 3.0])
+def test_shared_mean_draws_are_per_pixel_poisson(mu_d, monkeypatch):
+    """The pixels without light (one exact mean, the dark current's) are drawn as a Poisson
+    total scattered uniformly: over 200 frames of 20 000 pixels their counts have the mean,
+    the variance and the histogram (χ², against the Poisson pmf and against per-pixel
+    ``gen.poisson`` draws) of independent Poisson(mu_d) draws, a frame's total has the variance
+    of a Poisson total (not a fixed one) and neighbours are uncorrelated; the lit pixels keep
+    their own means.  Bounds: 4.5 standard errors, χ² p > 1e-4."""
+    from scipy import stats
+
+    n, reps = 20_000, 200
+    lam = np.full(n, mu_d)
+    lit = np.arange(0, n, 50)                      # 400 pixels with light of their own
+    lam[lit] = 40.0
+    dark = np.ones(n, bool)
+    dark[lit] = False
+    draws = np.stack([S._poisson_draws(np.random.default_rng(k), lam, mu_d) for k in range(reps)])
+    ref = np.stack([np.random.default_rng(10_000 + k).poisson(lam[dark]) for k in range(reps)])
+    d = draws[:, dark]
+    m = d.size
+    assert abs(d.mean() - mu_d) < 4.5 * math.sqrt(mu_d / m)
+    assert abs(d.var() - mu_d) < 4.5 * math.sqrt((mu_d + 2 * mu_d ** 2) / m)
+    top = int(stats.poisson.ppf(1 - 1e-5, mu_d))   # counts above it lumped into one bin
+    hist = np.bincount(np.minimum(d.ravel().astype(int), top + 1), minlength=top + 2)
+    pmf = np.append(stats.poisson.pmf(np.arange(top + 1), mu_d), stats.poisson.sf(top, mu_d))
+    ok = pmf * m >= 5                              # χ² bins with >= 5 expected counts,
+    k = int(ok.size if ok.all() else np.argmin(ok))
+    expected = pmf[:k] * m                         # the tail lumped into the last one
+    expected[-1] += m - expected.sum()
+    observed = hist[:k].copy()
+    observed[-1] += m - observed.sum()
+    assert stats.chisquare(observed, expected).pvalue > 1e-4
+    hist_ref = np.bincount(np.minimum(ref.ravel(), top + 1), minlength=top + 2)[:k]
+    hist_ref[-1] += ref.size - hist_ref.sum()
+    assert stats.chi2_contingency(np.stack([observed, hist_ref])).pvalue > 1e-4
+    totals = d.sum(axis=1)                         # a fixed total would have no variance
+    assert abs(totals.var(ddof=1) / (mu_d * d.shape[1]) - 1) < 4.5 * math.sqrt(2 / (reps - 1))
+    r = np.corrcoef(d[:, :-1].ravel(), d[:, 1:].ravel())[0, 1]
+    assert abs(r) < 4.5 / math.sqrt(m)
+    assert abs(draws[:, lit].mean() - 40.0) < 4.5 * math.sqrt(40.0 / draws[:, lit].size)
+    # expose draws dark frames this way: per-pixel draws (the scatter off) give another image
+    s = sensor12(dark_current_e_per_s=mu_d / 0.01, exposure_time_us=10_000.0, dark_noise_e=0.0)
+    scattered = S.expose(flat(0.0), s, rng=4)
+    monkeypatch.setattr(S, "_SCATTER_MAX_MEAN", -1.0)
+    assert not np.array_equal(scattered, S.expose(flat(0.0), s, rng=4))
+
+
 def test_rng_validation():
     with pytest.raises(ValueError, match="rng must be"):
         S.expose(flat(1.0), SensorModel(), rng="seed")

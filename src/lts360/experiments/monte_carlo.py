@@ -71,7 +71,11 @@ cores while other work shared them): a trial with a drawn calibration, its maste
 compensation and the measurement 0.45–0.67 s, the twin's correction of one section
 0.75–1.17 s more; a default trial corrects two sections (its own and the master's reference
 shot) and, with ``steps``, measures two more configurations: 100 such trials took 4 min on two
-worker processes (STUDIES.md, "Monte Carlo uncertainty").
+worker processes (STUDIES.md, "Monte Carlo uncertainty").  The configurations of one draw
+share its drawn calibration, its reference shots (imaged and measured once, not once per
+configuration) and one inverse plan (they differ only by compensation, applied to the
+measured points afterwards): a default trial then costs 1.06–1.10 s of CPU against
+1.79–1.80 s before (BENCHMARKS.md), two thirds of it the twin's two corrections.
 
 With ``steps`` (default on) each trial of the full Monte Carlo also measures its image with
 the other configurations of :data:`MC_STEPS` on the same draw (the same image, drawn
@@ -108,7 +112,7 @@ from lts360.experiments.gauge_study import (
     _step_key,
     gauge_placements,
 )
-from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study
+from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study, study_pool
 from lts360.folders import is_frame, read_frame_meta
 
 __all__ = ["INPUTS", "MC_STEPS", "mc_trial", "run_monte_carlo_study", "coverage_interval",
@@ -212,7 +216,7 @@ def _calibration(path: str):
 def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
                 noise_seed: int | None = None, shots: int = 1,
                 placement_mm: float = DEFAULT_PLACEMENT_MM, master: bool = False,
-                bias_model: str = "none"):
+                bias_model: str = "none", memo: dict | None = None):
     """``cal`` with the §4.4 view offsets measured with it on the reference placement
     (``placement_00``), whatever offsets ``cal`` held.  The reference image is noise-free, or
     with ``noise_seed`` has realistic sensor noise and a speckle pattern drawn from it; then
@@ -221,10 +225,45 @@ def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
     (:func:`~lts360.recon.calibration.compensation.master_fit`: per view a radial offset
     too); with ``bias_model="twin"`` its shots are corrected by their twin first
     (:func:`~lts360.twin.twin_corrected_raw`, as the plug-gauge study and ``lts360
-    compensate`` do: the master then sets what the twin leaves)."""
+    compensate`` do: the master then sets what the twin leaves).
+
+    ``memo``: a dict shared by the calls of one trial, all with the same ``cal``: the reference
+    shots are imaged and measured once for the configurations a trial compares (the same
+    images, the same measurements), not once per configuration."""
+    from lts360.recon.calibration.compensation import joint_view_offsets
+
+    key = ("shots", renders, rig_name, float(theta_step_deg), noise_seed, int(shots),
+           float(placement_mm))
+    if memo is not None and key in memo:
+        cal, results = memo[key]
+    else:
+        cal, results = _reference_shots(cal, renders, rig_name, theta_step_deg, noise_seed,
+                                        shots, placement_mm, memo)
+        if memo is not None:
+            memo[key] = (cal, results)
+    if master:
+        from lts360.recon.calibration.compensation import master_fit
+
+        if bias_model == "twin":
+            from lts360.twin import twin_corrected_raw
+
+            grid = _grid(theta_step_deg, placement_mm)
+            results = [twin_corrected_raw(r, cal, grid, _twin(cal)) for r in results]
+        fit = master_fit(results, GAUGE_DIAMETER_MM)
+        return dataclasses.replace(cal, view_offsets_mm=fit.offsets_mm,
+                                   view_radial_offsets_mm=fit.radial_offset_mm,
+                                   view_scales=fit.scale, master=fit.to_dict())
+    offsets = joint_view_offsets(results)
+    return dataclasses.replace(cal, view_offsets_mm=offsets)
+
+
+def _reference_shots(cal, renders: str, rig_name: str, theta_step_deg: float,
+                     noise_seed: int | None, shots: int, placement_mm: float,
+                     memo: dict | None = None):
+    """``cal`` without any compensation, and the reference placement's shots measured with
+    it (:func:`_compensate`'s images: noise-free, or ``shots`` noisy ones from ``noise_seed``)."""
     from types import SimpleNamespace
 
-    from lts360.recon.calibration.compensation import joint_view_offsets
     from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import sensor_image
@@ -240,21 +279,46 @@ def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
         ref, _, _ = sensor_image(rig, SimpleNamespace(radiance_W_m2_sr=Y0, laser_W_m2_sr=L0),
                                  noise="realistic" if noisy else "none", seed=s, speckle=noisy,
                                  speckle_seed=s + 1 if noisy else None)
-        results.append(inverse_triangulate(ref, cal, _grid(theta_step_deg, placement_mm)))
-    if master:
-        from lts360.recon.calibration.compensation import master_fit
+        grid = _grid(theta_step_deg, placement_mm)
+        results.append(inverse_triangulate(ref, cal, grid, plan=_plan(cal, grid, memo)))
+    return cal, results
 
-        if bias_model == "twin":
-            from lts360.twin import twin_corrected_raw
 
-            grid = _grid(theta_step_deg, placement_mm)
-            results = [twin_corrected_raw(r, cal, grid, _twin(cal)) for r in results]
-        fit = master_fit(results, GAUGE_DIAMETER_MM)
-        return dataclasses.replace(cal, view_offsets_mm=fit.offsets_mm,
-                                   view_radial_offsets_mm=fit.radial_offset_mm,
-                                   view_scales=fit.scale, master=fit.to_dict())
-    offsets = joint_view_offsets(results)
-    return dataclasses.replace(cal, view_offsets_mm=offsets)
+#: The fields of a calibration an inverse-triangulation plan does not read: the §4.4 offsets
+#: and the mastering (they move the measured points afterwards), the uncertainties, the optics.
+_NOT_PLANNED = ("view_offsets_mm", "view_radial_offsets_mm", "view_scales", "master",
+                "uncertainty", "optics")
+
+
+def _same(a, b) -> bool:
+    """Exact equality of calibration values (arrays bit for bit, containers and dataclasses
+    field by field)."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return np.shape(a) == np.shape(b) and np.array_equal(a, b)
+    if dataclasses.is_dataclass(a) and type(a) is type(b):
+        return all(_same(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(a))
+    if isinstance(a, (tuple, list)) and isinstance(b, (tuple, list)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    return type(a) is type(b) and a == b
+
+
+def _plan(cal, grid, memo: dict | None):
+    """:func:`~lts360.recon.triangulation.inverse.plan_inverse` for ``cal`` and ``grid``, as
+    ``inverse_triangulate`` makes it by default; with ``memo``, made once for the
+    calibrations of one trial whose geometry is the same, value for value (a drawn calibration
+    and its compensated forms: only their offsets and mastering differ), and handed to each."""
+    from lts360.recon.triangulation.inverse import plan_inverse
+
+    base = memo.get(("plan", id(grid))) if memo is not None else None
+    if base is None or base.grid is not grid or not all(
+            _same(getattr(base.cal, f.name), getattr(cal, f.name))
+            for f in dataclasses.fields(cal) if f.name not in _NOT_PLANNED):
+        base = plan_inverse(cal, grid, precompute=False)
+        if memo is not None:
+            memo[("plan", id(grid))] = base
+    return base if base.cal is cal else dataclasses.replace(base, cal=cal)
 
 
 def _twin(cal):
@@ -282,6 +346,7 @@ def _uncompensated(path: str):
                                view_scales={}, master={})
 
 
+@functools.lru_cache(maxsize=8)
 def _grid(theta_step_deg: float, placement_mm: float = DEFAULT_PLACEMENT_MM):
     """The fixed band about the gauge's radius: ±0.5 mm at the nominal placements, widened by
     the placement radius beyond them."""
@@ -327,8 +392,11 @@ def _nominal_radii(frame_dir: str, cal_path: str, renders: str, rig_name: str,
 
 
 def _trial_calibration(p: dict, vary: set, seeds, *, compensate: bool, master: bool,
-                       bias_model: str):
-    """The calibration a trial measures with: drawn or nominal, compensated as configured."""
+                       bias_model: str, memo: dict | None = None):
+    """The calibration a trial measures with: drawn or nominal, compensated as configured.
+
+    ``memo``: a dict the calls of one trial share (the same ``p``, ``vary``, ``seeds``): the
+    drawn calibration and its reference shots are made once for all its configurations."""
     from lts360.recon.calibration.uncertainty import sample_calibration
 
     pl_mm = float(p.get("placement_mm", DEFAULT_PLACEMENT_MM))
@@ -341,13 +409,17 @@ def _trial_calibration(p: dict, vary: set, seeds, *, compensate: bool, master: b
     if vary & {"calibration", "compensation"}:
         # A new calibration is followed by a new §4.4 compensation, as in the lab: measure
         # the gauge at the reference placement with it and put the views on one circle.
-        cal = _calibration(p["calibration"])
-        if "calibration" in vary:
-            cal = sample_calibration(cal, np.random.default_rng(seeds[2]))
-        return _compensate(cal, p["renders"], p["rig"], step,
+        memo = {} if memo is None else memo
+        if "drawn" not in memo:
+            cal = _calibration(p["calibration"])
+            if "calibration" in vary:
+                cal = sample_calibration(cal, np.random.default_rng(seeds[2]))
+            memo["drawn"] = cal
+        return _compensate(memo["drawn"], p["renders"], p["rig"], step,
                            noise_seed=int(seeds[4]) if "compensation" in vary else None,
                            shots=int(p.get("compensation_shots", 1)), placement_mm=pl_mm,
-                           master=master, bias_model=bias_model if master else "none")
+                           master=master, bias_model=bias_model if master else "none",
+                           memo=memo)
     return _nominal_calibration(p["calibration"], p["renders"], p["rig"], step, pl_mm, master,
                                 bias_model if master else "none")  # the same procedure, once
 
@@ -367,14 +439,14 @@ def _radius_error_um(result, dT: float) -> tuple[float, float, int]:
     return float(y), float(r.std() * 1e3), int(len(pts))
 
 
-def _measure(image, cal, grid, bias_model: str):
+def _measure(image, cal, grid, bias_model: str, memo: dict | None = None):
     """The section in ``image`` measured with ``cal`` (compensated if it holds offsets), and
     with ``bias_model="twin"`` corrected by its twin; also the uncorrected measurement and the
     mean bias the twin removed over the corrected points (µm; NaN without the twin)."""
     from lts360.recon.triangulation.inverse import inverse_triangulate
 
     comp = bool(cal.view_offsets_mm)
-    plain = inverse_triangulate(image, cal, grid, compensate=comp)
+    plain = inverse_triangulate(image, cal, grid, compensate=comp, plan=_plan(cal, grid, memo))
     if bias_model == "none":
         return plain, plain, np.nan
     from lts360.twin import twin_corrected
@@ -416,9 +488,10 @@ def mc_trial(trial: Trial) -> TrialOutput:
     if bias_model not in ("none", "twin"):
         raise ValueError(f"bias_model must be none or twin, got {bias_model!r}")
     grid = _grid(step, pl_mm)
+    memo: dict = {}  # the draw's calibration and reference shots, shared by its steps
     cal = _trial_calibration(p, vary, seeds, compensate=compensate, master=master,
-                             bias_model=bias_model)
-    out, plain, twin_bias = _measure(image, cal, grid, bias_model)
+                             bias_model=bias_model, memo=memo)
+    out, plain, twin_bias = _measure(image, cal, grid, bias_model, memo)
     offset = _offset_mm(frame_dir)
     dT = float(np.random.default_rng(seeds[3]).uniform(-DELTA_T_K, DELTA_T_K)) \
         if "temperature" in vary else 0.0
@@ -439,8 +512,10 @@ def mc_trial(trial: Trial) -> TrialOutput:
             if key == ours:
                 values[f"y_{key}_um"] = y
                 continue
-            c = _trial_calibration(p, vary, seeds, compensate=comp, master=mast, bias_model=bias)
-            values[f"y_{key}_um"] = _radius_error_um(_measure(image, c, grid, bias)[0], dT)[0]
+            c = _trial_calibration(p, vary, seeds, compensate=comp, master=mast, bias_model=bias,
+                                   memo=memo)
+            values[f"y_{key}_um"] = _radius_error_um(_measure(image, c, grid, bias, memo)[0],
+                                                     dT)[0]
     return TrialOutput(values=values)
 
 
@@ -471,12 +546,13 @@ def _batch_seed(seed: int, name: str, h: int) -> int:
 
 
 def _run_batches(out: Path, name: str, base: dict, *, seed: int, batch: int, max_batches: int,
-                 adaptive: bool, n_dig: int, workers, dask_address, say) -> tuple[np.ndarray, dict]:
+                 adaptive: bool, n_dig: int, workers, dask_address, pool,
+                 say) -> tuple[np.ndarray, dict]:
     batches, info = [], {}
     for h in range(max_batches):
         trials = plan_trials([dict(base)] * batch, _batch_seed(seed, name, h))
         ds = run_study(out / name / f"batch_{h:03d}", trials, mc_trial, name=f"{name}-{h}",
-                       workers=workers, dask_address=dask_address, progress=True)
+                       workers=workers, dask_address=dask_address, progress=True, pool=pool)
         y = ds["y_um"].values
         batches.append(y[np.isfinite(y)])
         if adaptive:
@@ -486,6 +562,30 @@ def _run_batches(out: Path, name: str, base: dict, *, seed: int, batch: int, max
             if stable:
                 break
     return np.concatenate(batches), info
+
+
+def _run_all_batches(out: Path, base: dict, kw: dict, *, trials: int, batch: int,
+                     adaptive: bool, n_dig: int, steps: bool, compensate: bool, master: bool,
+                     bias_model: str, sensitivity_trials: int) -> tuple[np.ndarray, dict, dict]:
+    """The full Monte Carlo's batches and the one-input-at-a-time runs: (y, summary, budget)."""
+    full = dict(base, vary="all", steps=True) if steps else dict(base, vary="all")
+    y, info = _run_batches(out, "mc", full, batch=batch,
+                           max_batches=(10_000 if adaptive else max(1, math.ceil(trials / batch))),
+                           adaptive=adaptive, n_dig=n_dig, **kw)
+    lo, hi = coverage_interval(y)
+    summary = {"M": int(len(y)), "mean_um": float(y.mean()), "u_um": float(y.std(ddof=1)),
+               "interval95_um": [lo, hi], "adaptive": adaptive, "adaptive_info": info,
+               "configuration": _config_label(compensate, master and compensate, bias_model),
+               "ours": _step_key(compensate, master and compensate, bias_model) or ""}
+    budget = {}
+    for name in INPUTS:
+        if name == "compensation" and not compensate:
+            continue
+        yi, _ = _run_batches(out, f"only-{name}", dict(base, vary=name), batch=sensitivity_trials,
+                             max_batches=1, adaptive=False, n_dig=n_dig, **kw)
+        budget[name] = {"u_um": float(yi.std(ddof=1)), "mean_um": float(yi.mean()),
+                        "M": int(len(yi))}
+    return y, summary, budget
 
 
 def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive: bool = False,
@@ -539,24 +639,13 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
         base["bias_model"] = "twin"
     if workers is None and dask_address is None:
         workers = 2
-    kw = dict(seed=seed, workers=workers, dask_address=dask_address, say=say)
-    full = dict(base, vary="all", steps=True) if steps else dict(base, vary="all")
-    y, info = _run_batches(out, "mc", full, batch=batch,
-                           max_batches=(10_000 if adaptive else max(1, math.ceil(trials / batch))),
-                           adaptive=adaptive, n_dig=n_dig, **kw)
-    lo, hi = coverage_interval(y)
-    summary = {"M": int(len(y)), "mean_um": float(y.mean()), "u_um": float(y.std(ddof=1)),
-               "interval95_um": [lo, hi], "adaptive": adaptive, "adaptive_info": info,
-               "configuration": _config_label(compensate, master and compensate, bias_model),
-               "ours": _step_key(compensate, master and compensate, bias_model) or ""}
-    budget = {}
-    for name in INPUTS:
-        if name == "compensation" and not compensate:
-            continue
-        yi, _ = _run_batches(out, f"only-{name}", dict(base, vary=name), batch=sensitivity_trials,
-                             max_batches=1, adaptive=False, n_dig=n_dig, **kw)
-        budget[name] = {"u_um": float(yi.std(ddof=1)), "mean_um": float(yi.mean()),
-                        "M": int(len(yi))}
+    with study_pool(workers, dask_address) as pool:  # one pool for every batch of the study
+        kw = dict(seed=seed, workers=workers, dask_address=dask_address, pool=pool, say=say)
+        y, summary, budget = _run_all_batches(out, base, kw, trials=trials, batch=batch,
+                                              adaptive=adaptive, n_dig=n_dig, steps=steps,
+                                              compensate=compensate, master=master,
+                                              bias_model=bias_model,
+                                              sensitivity_trials=sensitivity_trials)
     summary["budget"] = budget
     summary["gum_u_um"] = float(math.sqrt(sum(b["u_um"] ** 2 for b in budget.values())))
     summary["ranking"] = sorted(budget, key=lambda k: -budget[k]["u_um"])

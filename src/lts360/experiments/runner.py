@@ -44,7 +44,7 @@ if TYPE_CHECKING:
     from lts360.scenes.rig import Rig
 
 __all__ = ["Trial", "TrialOutput", "TrialError", "plan_trials", "grid_params", "run_study",
-           "to_grid", "trial_path", "trial_setup"]
+           "study_pool", "to_grid", "trial_path", "trial_setup"]
 
 logger = logging.getLogger(__name__)
 
@@ -231,7 +231,8 @@ def trial_setup(params: dict, *, spec: str | None = None) -> tuple[Rig, SceneObj
 
 def run_study(out_dir, trials: Sequence[Trial], fn: Callable[[Trial], TrialOutput], *, name: str,
               workers: int | None = None, dask_address: str | None = None,
-              progress: bool = True, attrs: dict | None = None) -> xr.Dataset:
+              progress: bool = True, attrs: dict | None = None,
+              pool: concurrent.futures.ProcessPoolExecutor | None = None) -> xr.Dataset:
     """Run every trial not yet on disk, then combine all trials into ``out_dir/results.nc``.
 
     Parameters
@@ -263,6 +264,12 @@ def run_study(out_dir, trials: Sequence[Trial], fn: Callable[[Trial], TrialOutpu
     attrs : dict, optional
         Extra attributes of the results (NetCDF-serialisable: str, int, float or lists of them);
         ``name``, ``n_trials`` and ``plan_fingerprint`` are set by the runner.
+    pool : ProcessPoolExecutor, optional
+        A pool opened by :func:`study_pool` and shared by several calls (the batches of one
+        study), used where ``workers > 1``: its worker processes, their imports and caches are
+        kept from one call to the next, and the pool is left open. ``None``: a pool of
+        ``workers`` processes is started for this call and shut down at its end. Not with
+        ``dask_address``.
 
     Returns
     -------
@@ -295,6 +302,8 @@ def run_study(out_dir, trials: Sequence[Trial], fn: Callable[[Trial], TrialOutpu
         raise ValueError(f"name must be a non-empty string, got {name!r}")
     attrs = _check_attrs(attrs)
     workers = _check_workers(workers, dask_address)
+    if pool is not None and dask_address is not None:
+        raise ValueError("pass either pool or dask_address, not both")
     plan = _plan_record(name, trials)
     out_dir.mkdir(parents=True, exist_ok=True)
     _claim_plan(out_dir / "plan.json", plan)
@@ -306,7 +315,7 @@ def run_study(out_dir, trials: Sequence[Trial], fn: Callable[[Trial], TrialOutpu
         _check_picklable(fn)
     logger.info("study %r: %d of %d trials done, running %d", name, len(trials) - len(pending),
                 len(trials), len(pending))
-    _run_pending(out_dir, pending, fn, name, workers, dask_address,
+    _run_pending(out_dir, pending, fn, name, workers, dask_address, pool,
                  bar=tqdm(total=len(trials), initial=len(trials) - len(pending), desc=name,
                           unit="trial", disable=None if progress else True))
     results = _combine(out_dir, trials, {"name": name, "n_trials": len(trials),
@@ -323,7 +332,7 @@ def trial_path(out_dir, index: int) -> Path:
 
 
 def _run_pending(out_dir: Path, pending: list[Trial], fn, name: str, workers: int | None,
-                 dask_address: str | None, bar) -> None:
+                 dask_address: str | None, pool, bar) -> None:
     """Run ``pending``, writing each finished trial; raise the first failure at the end."""
     if not pending:
         bar.close()
@@ -333,7 +342,7 @@ def _run_pending(out_dir: Path, pending: list[Trial], fn, name: str, workers: in
     elif workers == 1:
         outcomes = _outcomes_sequential(fn, pending)
     else:
-        outcomes = _outcomes_pool(fn, pending, min(workers, len(pending)))
+        outcomes = _outcomes_pool(fn, pending, min(workers, len(pending)), pool)
     failure = None
     with bar, contextlib.closing(outcomes):  # shuts the pool or client down on errors
         for trial, outcome in outcomes:
@@ -369,11 +378,15 @@ def _outcomes_sequential(fn, pending: list[Trial]) -> Iterator[tuple[Trial, obje
             return
 
 
-def _outcomes_pool(fn, pending: list[Trial], workers: int) -> Iterator[tuple[Trial, object]]:
+def _outcomes_pool(fn, pending: list[Trial], workers: int,
+                   shared: concurrent.futures.ProcessPoolExecutor | None = None,
+                   ) -> Iterator[tuple[Trial, object]]:
     """Yield outcomes as a spawn process pool completes them; after a failure no trial starts,
-    those already running are still yielded."""
-    pool = concurrent.futures.ProcessPoolExecutor(
-        max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+    those already running are still yielded. ``shared``: a pool of :func:`study_pool`, left
+    open (on an early exit its trials not yet started are cancelled and the running ones
+    waited for); otherwise a pool of ``workers`` processes, shut down at the end."""
+    pool = shared if shared is not None else _spawn_pool(workers)
+    futures = {}
     try:
         futures = {pool.submit(_evaluate, fn, t): t for t in pending}
         for fut in concurrent.futures.as_completed(futures):
@@ -384,6 +397,47 @@ def _outcomes_pool(fn, pending: list[Trial], workers: int) -> Iterator[tuple[Tri
                 for other in futures:
                     other.cancel()
             yield futures[fut], exc if exc is not None else fut.result()
+    finally:
+        if shared is None:
+            pool.shutdown(wait=True, cancel_futures=True)
+        else:
+            for fut in futures:
+                fut.cancel()
+            concurrent.futures.wait(futures)
+
+
+def _spawn_pool(workers: int) -> concurrent.futures.ProcessPoolExecutor:
+    return concurrent.futures.ProcessPoolExecutor(
+        max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+
+
+@contextlib.contextmanager
+def study_pool(workers: int | None = None, dask_address: str | None = None,
+               ) -> Iterator[concurrent.futures.ProcessPoolExecutor | None]:
+    """One local process pool for every :func:`run_study` call of a study (``pool=``).
+
+    A study run as several calls (the batches of a Monte Carlo) otherwise starts a pool per
+    call, each worker importing numpy, xarray and Mitsuba again (seconds of CPU each) and
+    rebuilding its caches. Results do not change: every trial depends on its seed only.
+
+    Parameters
+    ----------
+    workers, dask_address
+        As for :func:`run_study`. Yields ``None`` (nothing to share) for ``workers=1`` or a
+        Dask cluster, else a "spawn" pool of ``workers`` processes, shut down on exit
+        (waiting for the trials already running).
+
+    >>> with study_pool(workers=2) as pool:                                 # doctest: +SKIP
+    ...     for h in range(4):
+    ...         run_study(f"out/batch_{h}", plans[h], my_trial, name=f"b{h}", workers=2, pool=pool)
+    """
+    workers = _check_workers(workers, dask_address)
+    if dask_address is not None or workers == 1:
+        yield None
+        return
+    pool = _spawn_pool(workers)
+    try:
+        yield pool
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
 

@@ -274,12 +274,18 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
     seeds = np.random.SeedSequence([int(seed), 0x1A5E]).spawn(2)
     if speckle_seed is not None:
         seeds[0] = np.random.SeedSequence([int(speckle_seed), 0x5BEC])
-    radiance = res.radiance_W_m2_sr.astype(np.float64)
     laser = res.laser_W_m2_sr
     lit = laser > 0
+    on = np.flatnonzero(laser != 0)
+    # The light is carried as the pixels that hold any (a pixel support frame: ~1 % of them):
+    # a dark pixel's electrons are 0 whatever the radiometry's factors, so only the lit ones
+    # are converted (the same products, pixel by pixel, as over the whole frame).
+    flat = np.asarray(res.radiance_W_m2_sr).reshape(-1)
+    held = np.union1d(np.flatnonzero(flat), on)
+    radiance = flat[held].astype(np.float64)
     if speckle is None:
         speckle = noise == "realistic"
-    if speckle and laser.any():
+    if speckle and on.size:
         # Position-keyed speckle on the tiles that hold laser light: a pixel's speckle is the
         # same whichever other pixels were rendered (a support frame's equals a full frame's).
         pattern = speckle_on_tiles(lit, pixel_pitch_um=pitch_um,
@@ -287,8 +293,7 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
                                    magnification=magnification,
                                    rng=np.random.default_rng(seeds[0]))
         # Added where the laser share is not 0 only (elsewhere the term is 0: the same sums).
-        on = np.flatnonzero(laser != 0)
-        radiance.flat[on] += laser.flat[on] * (pattern.flat[on] - 1.0)
+        radiance[np.searchsorted(held, on)] += laser.flat[on] * (pattern.flat[on] - 1.0)
     if exposure_time_s is None:
         # The statistic over the laser-lit pixels only (the same values as a mask over the
         # whole frame, without converting the dark rest).
@@ -301,8 +306,9 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
         radiance, wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
         pixel_pitch_um=pitch_um, exposure_time_s=exposure_time_s,
         quantum_efficiency=sens.quantum_efficiency, magnification=magnification)
-    image = sensor_mod.expose(electrons, sens, rng=np.random.default_rng(seeds[1]),
-                              noise=noise == "realistic", exposure_time_s=exposure_time_s)
+    image = sensor_mod.expose_held(res.radiance_W_m2_sr.shape, held, electrons, sens,
+                                   rng=np.random.default_rng(seeds[1]),
+                                   noise=noise == "realistic", exposure_time_s=exposure_time_s)
     return image, float(exposure_time_s), float(magnification)
 
 

@@ -53,7 +53,7 @@ from lts360.scenes.sensor import SensorModel
 __all__ = [
     "PLANCK_J_S", "SPEED_OF_LIGHT_M_S", "QUANTISATION_VARIANCE_DN2",
     "photon_energy_J", "image_irradiance_W_m2", "radiance_to_electrons_mean",
-    "FixedPattern", "fixed_pattern", "expose", "expected_dn",
+    "FixedPattern", "fixed_pattern", "expose", "expose_held", "expected_dn",
     "AutoExposure", "ExposureWarning", "ExposureError", "plan_exposure", "auto_exposure",
     "temporal_stats", "spatial_stats", "predicted_photon_transfer",
     "seed_sequence", "spawn_generators",
@@ -75,6 +75,12 @@ _N_BLOCKS = 8
 #: is < 1e-12 for full_well >= 100), and the cap keeps huge radiances from overflowing.
 _LAMBDA_CAP_FACTOR = 2.0
 _LAMBDA_CAP_E = 1000.0
+#: Largest mean charge shared by many pixels (the dark current's, in pixels without light) that
+#: is drawn as one Poisson total scattered over the pixels (:func:`_poisson_draws`); above it
+#: (or below 0, to turn it off) every pixel is drawn alone.  The scatter is cheaper while the
+#: total is small: 0.7 against 2.3 ms for 164 000 pixels at a mean of 0.05 e⁻, 3.8 against 7.5
+#: at 5 e⁻.
+_SCATTER_MAX_MEAN = 8.0
 
 
 
@@ -330,36 +336,73 @@ def expose(electrons_mean, sensor: SensorModel, *, rng, noise: bool = True,
     mu = _as_nonneg_array(electrons_mean, "electrons_mean")
     if mu.ndim < 1 or mu.size == 0:
         raise ValueError(f"electrons_mean must be a non-empty array, got shape {mu.shape}")
+    return _expose(mu.shape, None, mu, sensor, rng=rng, noise=noise,
+                   fixed_pattern_noise=fixed_pattern_noise, exposure_time_s=exposure_time_s,
+                   workers=workers)
+
+
+def _expose(shape: tuple[int, ...], index, mu: np.ndarray, sensor: SensorModel, *, rng,
+            noise: bool, fixed_pattern_noise, exposure_time_s, workers) -> np.ndarray:
+    """:func:`expose` of the mean electrons ``mu`` (checked): the dense image when ``index``
+    is None, else the values at the flat indices ``index`` (sorted, each once; 0 elsewhere).
+    A pixel without light has ``0 · gain + mu_d = mu_d`` before its draws: the same numbers
+    whether it is multiplied out or filled in."""
     t = sensor.exposure_time_s if exposure_time_s is None else float(exposure_time_s)
     if not (math.isfinite(t) and t >= 0):
         raise ValueError(f"exposure_time_s must be finite and >= 0, got {exposure_time_s!r}")
     use_fpn = noise if fixed_pattern_noise is None else bool(fixed_pattern_noise)
-    fpn = fixed_pattern(mu.shape, sensor) if use_fpn else None
+    fpn = fixed_pattern(shape, sensor) if use_fpn else None
     K = sensor.system_gain
     offset = float(sensor.dark_offset_dn)
     full_well = float(sensor.full_well_e)
     top = float(sensor.full_scale_dn)
     mu_d = float(sensor.dark_current_e_per_s) * t
     sigma_read = float(sensor.dark_noise_e)
-    out = np.empty(mu.shape, dtype=sensor.dtype)
-    blocks = _row_blocks(mu.shape[0])
+    out = np.empty(shape, dtype=sensor.dtype)
+    if not noise and fpn is None:  # deterministic: each pixel alone; a dark one is a constant
+        if index is None:
+            flat = mu.reshape(-1)
+            index = np.flatnonzero(flat)
+            mu = flat[index]
+        _expected_into(out, index, mu, mu_d=mu_d, full_well=full_well, K=K, offset=offset,
+                       top=top)
+        return out
+    blocks = _row_blocks(shape[0])
     gens = spawn_generators(rng, len(blocks)) if noise else [None] * len(blocks)
     cap = _LAMBDA_CAP_FACTOR * full_well + _LAMBDA_CAP_E
+    row = int(np.prod(shape[1:], dtype=np.int64))
+
+    def mean_charge(sl: slice) -> np.ndarray:
+        if index is None:
+            m = mu[sl]
+            lam = m * fpn.prnu_gain[sl] if fpn is not None else m.copy()
+            lam += mu_d
+            return lam
+        lam = np.full((sl.stop - sl.start,) + tuple(shape[1:]), mu_d)
+        a, b = np.searchsorted(index, [sl.start * row, sl.stop * row])
+        at = index[a:b] - sl.start * row
+        v = mu[a:b] * fpn.prnu_gain[sl].reshape(-1)[at] if fpn is not None else mu[a:b].copy()
+        v += mu_d
+        if noise and mu_d <= cap:  # the cap only touches the lit pixels (a dark one is mu_d)
+            np.minimum(v, cap, out=v)
+        lam.reshape(-1)[at] = v
+        return lam
 
     def block(i: int) -> None:
         sl = blocks[i]
-        m = mu[sl]
-        if m.size == 0:
+        if sl.stop <= sl.start:
             return
-        lam = m * fpn.prnu_gain[sl] if fpn is not None else m.copy()
-        lam += mu_d
+        lam = mean_charge(sl)
         if noise:
             gen = gens[i]
-            np.minimum(lam, cap, out=lam)
-            a = gen.poisson(lam).astype(np.float64)
+            if index is None or mu_d > cap:
+                np.minimum(lam, cap, out=lam)
+            a = _poisson_draws(gen, lam, mu_d)
             np.minimum(a, full_well, out=a)
             if sigma_read > 0:
-                a += sigma_read * gen.standard_normal(a.shape)
+                z = gen.standard_normal(a.shape)
+                z *= sigma_read
+                a += z
         else:
             a = np.minimum(lam, full_well, out=lam)
         if fpn is not None:
@@ -372,6 +415,69 @@ def expose(electrons_mean, sensor: SensorModel, *, rng, noise: bool = True,
 
     _run_blocks(block, len(blocks), workers)
     return out
+
+
+def _poisson_draws(gen: np.random.Generator, lam: np.ndarray, shared: float) -> np.ndarray:
+    """Independent ``Poisson(lam)`` draws (float64, the shape of ``lam``).
+
+    Where the pixels mostly share the mean ``shared`` (those without light: the dark current's
+    charge) and it is at most :data:`_SCATTER_MAX_MEAN`, all ``N`` pixels first get the counts
+    of a ``Poisson(N · shared)`` total of charges each put in a uniformly drawn pixel
+    (``integers`` + ``bincount``): by the splitting property of the Poisson process these
+    counts are exactly independent ``Poisson(shared)`` draws, one per pixel.  The pixels whose
+    mean differs are then drawn alone and replace theirs (independent of the rest).  The
+    distribution is that of one ``gen.poisson(lam)``; the realisation is another."""
+    n = lam.size
+    if not 0.0 <= shared <= _SCATTER_MAX_MEAN:
+        return gen.poisson(lam).astype(np.float64)
+    flat = lam.reshape(-1)
+    other = np.flatnonzero(flat != shared)
+    if 2 * other.size > n:  # mostly lit: one draw per pixel costs less
+        return gen.poisson(lam).astype(np.float64)
+    total = int(gen.poisson(shared * n))
+    a = np.bincount(gen.integers(0, n, size=total), minlength=n).astype(np.float64)
+    a[other] = gen.poisson(flat[other])
+    return a.reshape(lam.shape)
+
+
+def _expected_into(out: np.ndarray, index: np.ndarray, mu: np.ndarray, *, mu_d: float,
+                   full_well: float, K: float, offset: float, top: float) -> None:
+    """``out`` = the noise-free digital values (``expose(noise=False)`` without the fixed
+    pattern) of an image whose mean electrons are ``mu`` at the flat indices ``index`` and 0
+    elsewhere: the pixels without light all take the value of 0 electrons, the others are
+    converted one by one (the same operations, in the same order, as over the whole frame)."""
+
+    def dn(m: np.ndarray) -> np.ndarray:
+        a = m + mu_d
+        np.minimum(a, full_well, out=a)
+        a *= K
+        a += offset + 0.5
+        np.floor(a, out=a)
+        np.clip(a, 0.0, top, out=a)
+        return a
+
+    out.fill(dn(np.zeros(1))[0])
+    out.reshape(-1)[index] = dn(mu)
+
+
+def expose_held(shape: tuple[int, ...], index, electrons_mean, sensor: SensorModel, *, rng,
+                noise: bool = True, exposure_time_s: float | None = None,
+                workers: int | None = None) -> np.ndarray:
+    """:func:`expose` of an image of ``shape`` whose mean electrons are ``electrons_mean`` at
+    the flat indices ``index`` (each once) and 0 elsewhere — a frame whose light is held by a
+    few pixels.  The same image as ``expose`` of the dense array, bit for bit (the same draws
+    from the same streams); the dark pixels are not converted from a dense array."""
+    shape = tuple(int(n) for n in shape)
+    if not shape or any(n < 1 for n in shape):
+        raise ValueError(f"shape must be positive integers, got {shape}")
+    idx = np.asarray(index, np.int64).reshape(-1)
+    mu = _as_nonneg_array(electrons_mean, "electrons_mean").reshape(-1)
+    if mu.shape != idx.shape:
+        raise ValueError(f"index and electrons_mean differ in length: {idx.size} != {mu.size}")
+    if idx.size and (idx[0] < 0 or idx[-1] >= math.prod(shape) or np.any(np.diff(idx) <= 0)):
+        raise ValueError("index must be sorted flat indices inside the image, each once")
+    return _expose(shape, idx, mu, sensor, rng=rng, noise=noise, fixed_pattern_noise=None,
+                   exposure_time_s=exposure_time_s, workers=workers)
 
 
 def expected_dn(electrons_mean, sensor: SensorModel, *, exposure_time_s: float | None = None

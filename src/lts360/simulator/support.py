@@ -230,10 +230,10 @@ def _sample_triangles(tri: np.ndarray, step_mm: float) -> np.ndarray:
     first_pt = np.cumsum(m) - m
     i = np.arange(row_of_pt.size) - np.repeat(first_pt, m)
     s = i / np.maximum(m[row_of_pt] - 1, 1)
-    tr, tt = tri_of_row[row_of_pt], t[row_of_pt]
-    P0 = A[tr] + tt[:, None] * (C[tr] - A[tr])
-    P1 = B[tr] + tt[:, None] * (C[tr] - B[tr])
-    return P0 + s[:, None] * (P1 - P0), tr
+    # Each row's ends once (the same numbers as point by point), then spread to its points.
+    P0 = A[tri_of_row] + t[:, None] * (C[tri_of_row] - A[tri_of_row])
+    P1 = B[tri_of_row] + t[:, None] * (C[tri_of_row] - B[tri_of_row])
+    return P0[row_of_pt] + s[:, None] * (P1 - P0)[row_of_pt], tri_of_row[row_of_pt]
 
 
 def slab_triangles(rig, shapes, *, max_bounces: int = 2) -> np.ndarray:
@@ -357,16 +357,22 @@ def geometric_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_le
     # A ray through a mirror passes within the aperture's radius of the chief ray: a mirror
     # edge is blurred over that much (plus 1 mm).
     edge_mm = cam.aperture_diameter_mm + 1.0 if thin_lens else 1.0
+    no_normal = np.isnan(normals[:, 0])
     for seq, (A, b) in zip(_sequences(rig, max_bounces), maps):
-        Xv = pts @ A.T + b
         # One-sided surfaces (no BSDF here is two-sided): a point seen from behind its face
         # holds no light for this view.  The pupil's rays reach up to ~1° around the chief
-        # ray: keep faces down to BACKFACE_COS edge-on.
-        to_cam = C - Xv
-        facing = np.einsum("ij,ij->i", normals @ A.T, to_cam) \
-            > -BACKFACE_COS * np.linalg.norm(to_cam, axis=1)
-        seen = (facing | np.isnan(normals[:, 0])) & _through_mirrors(rig, seq, C, Xv, edge_mm)
-        Pc = world_to_camera(Xv[seen], cam.R, cam.t_mm)
+        # ray: keep faces down to BACKFACE_COS edge-on.  Tested where the points are, against
+        # the camera centre unfolded by the view's mirrors (A is orthogonal: the angle and the
+        # distance are those of the mirror image and the camera).
+        to_cam = A.T @ (C - b) - pts
+        facing = np.einsum("ij,ij->i", normals, to_cam) \
+            > -BACKFACE_COS * np.sqrt(np.einsum("ij,ij->i", to_cam, to_cam))
+        # The mirror checks and the projection on the points that face the view only (half of
+        # them: a convex object turns half its section away).
+        Xv = pts[facing | no_normal] @ A.T + b
+        if seq:
+            Xv = Xv[_through_mirrors(rig, seq, C, Xv, edge_mm)]
+        Pc = world_to_camera(Xv, cam.R, cam.t_mm)
         front = Pc[:, 2] > 1e-6
         if not front.any():
             continue
