@@ -58,11 +58,13 @@ def check_rig(rig, *, draws: int = 200, spp: int = 16, seed: int = 0) -> dict:
     space = DesignSpace.create(rig)
     out = {"rig": rig.name}
     for speckle in ("pixel", "dorsch"):
-        # no compensation: the simulation below measures with the true calibration, so the
-        # model's σ_R is the image's own share (Conditions compensates by default)
+        # no compensation: the simulation below measures with the true calibration and
+        # scores the spread of the radius error, so the model's σ_R is the image's own share
+        # (Conditions compensates by default; the bias the twin would leave is a constant
+        # for a given rig and gauge, not part of a spread)
         e = evaluate(space, None, Conditions(diameters_mm=(GAUGE_DIAMETER_MM,), n_theta=360,
                                              speckle=speckle, compensate=False), gradient=False)
-        out[f"model_{speckle}"] = {"sigma_R_um": float(e.sigma_R_um[0]),
+        out[f"model_{speckle}"] = {"sigma_R_um": float(e.sigma_R_noise_um[0]),
                                    "point_rms_um": float(e.point_rms_um[0]),
                                    "speckle_rms_um": float(e.speckle_rms_um[0]),
                                    "coverage_deg": float(e.coverage_deg[0])}
