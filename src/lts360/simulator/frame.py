@@ -280,9 +280,16 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
     # The light is carried as the pixels that hold any (a pixel support frame: ~1 % of them):
     # a dark pixel's electrons are 0 whatever the radiometry's factors, so only the lit ones
     # are converted (the same products, pixel by pixel, as over the whole frame).
+    # A frame lit nearly everywhere (a board under ambient light) is converted whole: the
+    # index of every pixel costs more than it saves (expose and expose_held agree bit for bit).
     flat = np.asarray(res.radiance_W_m2_sr).reshape(-1)
-    held = np.union1d(np.flatnonzero(flat), on)
-    radiance = flat[held].astype(np.float64)
+    held = np.flatnonzero(flat)
+    if 2 * held.size > flat.size:
+        held = None
+        radiance = flat.astype(np.float64)
+    else:
+        held = np.union1d(held, on)
+        radiance = flat[held].astype(np.float64)
     if speckle is None:
         speckle = noise == "realistic"
     if speckle and on.size:
@@ -293,7 +300,8 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
                                    magnification=magnification,
                                    rng=np.random.default_rng(seeds[0]))
         # Added where the laser share is not 0 only (elsewhere the term is 0: the same sums).
-        radiance[np.searchsorted(held, on)] += laser.flat[on] * (pattern.flat[on] - 1.0)
+        at = on if held is None else np.searchsorted(held, on)
+        radiance[at] += laser.flat[on] * (pattern.flat[on] - 1.0)
     if exposure_time_s is None:
         # The statistic over the laser-lit pixels only (the same values as a mask over the
         # whole frame, without converting the dark rest).
@@ -306,9 +314,15 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
         radiance, wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
         pixel_pitch_um=pitch_um, exposure_time_s=exposure_time_s,
         quantum_efficiency=sens.quantum_efficiency, magnification=magnification)
-    image = sensor_mod.expose_held(res.radiance_W_m2_sr.shape, held, electrons, sens,
-                                   rng=np.random.default_rng(seeds[1]),
-                                   noise=noise == "realistic", exposure_time_s=exposure_time_s)
+    if held is None:
+        image = sensor_mod.expose(electrons.reshape(res.radiance_W_m2_sr.shape), sens,
+                                  rng=np.random.default_rng(seeds[1]),
+                                  noise=noise == "realistic", exposure_time_s=exposure_time_s)
+    else:
+        image = sensor_mod.expose_held(res.radiance_W_m2_sr.shape, held, electrons, sens,
+                                       rng=np.random.default_rng(seeds[1]),
+                                       noise=noise == "realistic",
+                                       exposure_time_s=exposure_time_s)
     return image, float(exposure_time_s), float(magnification)
 
 
