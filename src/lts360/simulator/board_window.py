@@ -344,11 +344,10 @@ def merge_boxes(boxes) -> list[tuple[int, int, int, int]]:
     return sorted(out)
 
 
-def _path_views(rig, board, *, thin_lens: bool, max_bounces: int, scale: float,
-                margin_px: float, outline: bool):
-    """For every mirror path the renderer follows: the film box where the board can be seen
-    along it (clipped to the mirrors it goes through) and, with ``outline``, the board's padded
-    outline on the film (``None`` where only the box is known).  Also returns the film size."""
+def _film(rig, scale: float, thin_lens: bool):
+    """The camera as the film boxes see it: intrinsics at ``scale``, distortion, film size (as
+    camera_to_mitsuba), the lens for :func:`view_box`, the distortion's stretch, and the
+    camera's pose ``R, t``."""
     cam = rig.camera
     K = scale_intrinsics(cam.K, scale)
     dist = np.asarray(cam.distortion, dtype=float)
@@ -356,8 +355,16 @@ def _path_views(rig, board, *, thin_lens: bool, max_bounces: int, scale: float,
     H = max(1, int(round(cam.height_px * scale)))
     lens = {"aperture_radius_mm": float(cam.aperture_diameter_mm) / 2.0 if thin_lens else 0.0,
             "focus_distance_mm": float(cam.focus_distance_mm)}
-    stretch = _stretch(K, dist, W, H)
     R, t = np.asarray(cam.R, dtype=float), np.asarray(cam.t_mm, dtype=float)
+    return K, dist, W, H, lens, _stretch(K, dist, W, H), R, t
+
+
+def _path_views(rig, board, *, thin_lens: bool, max_bounces: int, scale: float,
+                margin_px: float, outline: bool):
+    """For every mirror path the renderer follows: the film box where the board can be seen
+    along it (clipped to the mirrors it goes through) and, with ``outline``, the board's padded
+    outline on the film (``None`` where only the box is known).  Also returns the film size."""
+    K, dist, W, H, lens, stretch, R, t = _film(rig, scale, thin_lens)
 
     def view(points_world, T, with_outline):
         X = points_world @ T[:3, :3].T + T[:3, 3]
@@ -453,15 +460,7 @@ def mirror_edge_pixels(rig, *, thin_lens: bool = True, max_bounces: int = 2, sca
     (n, 2) int
         ``(x, y)`` of each pixel once, row-major.
     """
-    cam = rig.camera
-    K = scale_intrinsics(cam.K, scale)
-    dist = np.asarray(cam.distortion, dtype=float)
-    W = max(1, int(round(cam.width_px * scale)))  # as camera_to_mitsuba
-    H = max(1, int(round(cam.height_px * scale)))
-    lens = {"aperture_radius_mm": float(cam.aperture_diameter_mm) / 2.0 if thin_lens else 0.0,
-            "focus_distance_mm": float(cam.focus_distance_mm)}
-    stretch = _stretch(K, dist, W, H)
-    R, t = np.asarray(cam.R, dtype=float), np.asarray(cam.t_mm, dtype=float)
+    K, dist, W, H, lens, stretch, R, t = _film(rig, scale, thin_lens)
 
     def image(k, T, edges):
         """Film mask of mirror ``k`` seen through the mirrors of ``T`` (its box where the
