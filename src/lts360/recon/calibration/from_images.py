@@ -368,8 +368,11 @@ def _map(fn, items: list) -> list:
     """``[fn(x) for x in items]``, run on :data:`FIT_THREADS` threads (the shots are
     independent, each result depends on its own shot only: the same results in the same
     order; the first exception is raised).  OpenCV's detectors, SciPy's filters and NumPy's
-    array arithmetic run without Python's lock, so a second core shortens the calibration's
-    steps after the rendering, where the renderer no longer keeps it busy."""
+    arithmetic on large arrays release Python's lock, so after the rendering a second core
+    shares these steps.  Measured with ``benchmarks/bench_calibration.py --seed 1`` on the
+    2-core machine while other work shared it (2026-12-05): the mirror shots' boards 6.7 s of
+    CPU in 4.2 s, the laser lines 3.7 s in 1.9 s (on one thread: 6.0 s in 6.1 s, 5.1 s in
+    5.7 s); the wall times under such load are only indicative."""
     if FIT_THREADS <= 1 or len(items) <= 1:
         return [fn(x) for x in items]
     from concurrent.futures import ThreadPoolExecutor
