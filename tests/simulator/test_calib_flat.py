@@ -59,7 +59,7 @@ def test_board_lines_are_the_grid_and_the_outline(board):
 def test_board_edge_pixels_hold_every_pixel_whose_samples_differ(variant, rig, board):
     """With the flat estimator a pixel whose rays all meet one square has one value for any
     sample count: at 1 and 64 spp the board's pixels differ (by more than one sample's rare
-    numerical miss, a shadow ray meeting the board) only on :func:`board_edge_pixels`, even
+    miss of value zero, see ``FLAT_EDGE_MARGIN_PX``) only on :func:`board_edge_pixels`, even
     with no safety margin; and the edge pixels are a part of the board only."""
     from lts360.simulator.calib_render import _flat_integrator
     from lts360.simulator.render import prepare_scene, render_pixels

@@ -62,8 +62,8 @@ FLAT_EDGE_SPP_DIVISOR = 4
 #: Safety margin (px) of the camera shots' edge pixels (:func:`_split_pixels`).  With none, on
 #: the 30 camera boards of the demo (1280 × 1024, 2026-12-05), :func:`_flat_integrator` at 1
 #: and at 64 spp differed on no pixel outside the edge pixels by more than one sample's rare
-#: numerical miss (a shadow ray meeting the board itself: 25 pixels in 8.2 M, by 1/64 of their
-#: value); one pixel more is kept.
+#: miss (one sample of value zero, likely a shadow ray meeting the board itself — not traced
+#: down: 25 pixels in 8.2 M, by 1/64 of their value); one pixel more is kept.
 FLAT_EDGE_MARGIN_PX = 1.0
 
 #: Sampler seed of the pictures without a board (one per mirror configuration and spp).
