@@ -15,7 +15,7 @@ The calibration's values are written beside the timings (``--json``) so that two
 results can be compared: run it with ``PYTHONPATH`` at another checkout's ``src`` to measure
 that code ("before").
 
-Usage: python benchmarks/bench_calibration.py [--out DIR] [--json OUT]
+Usage: python benchmarks/bench_calibration.py [--out DIR] [--json OUT] [--seed N]
 """
 
 from __future__ import annotations
@@ -59,6 +59,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default=None, help="output folder (default: a temporary one)")
     ap.add_argument("--json", default=None, help="write the rows and the values here")
+    ap.add_argument("--seed", type=int, default=0,
+                    help="the calibration's seed (default 0, the demo's): another noise "
+                         "realisation, to see how far the values move by chance")
     args = ap.parse_args(argv)
 
     import mitsuba as mi
@@ -72,7 +75,7 @@ def main(argv=None) -> int:
     out = Path(args.out or tempfile.mkdtemp(prefix="bench-calibration-"))
     cr_render = cr.render_calibration_images
     cr.render_calibration_images = _timed(cr_render, times, "render")
-    _timed(run.run_calibrate, times, "calibrate")(out, rig_name="paper", noise="realistic", seed=0,
+    _timed(run.run_calibrate, times, "calibrate")(out, rig_name="paper", noise="realistic", seed=args.seed,
                                                   say=lambda *_: None)
     cr.render_calibration_images = cr_render
 
@@ -95,7 +98,7 @@ def main(argv=None) -> int:
     if args.json:
         Path(args.json).write_text(json.dumps(
             {"rows": times, "values": _values(result.calibration), "load": load,
-             "commit": commit, "machine": platform.processor() or platform.machine(),
+             "commit": commit, "seed": args.seed, "machine": platform.processor() or platform.machine(),
              "cpus": os.cpu_count(), "date": time.strftime("%Y-%m-%d", time.gmtime())},
             indent=1))
     return 0

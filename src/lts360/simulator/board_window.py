@@ -27,8 +27,9 @@ import numpy as np
 
 from lts360.geometry.camera import distort_normalized, scale_intrinsics, undistort_normalized
 
-__all__ = ["board_windows", "board_pixels", "mirror_edge_pixels", "edge_mask", "view_box", "merge_boxes", "mirror_paths", "clip_near",
-           "blur_radius_norm", "FILTER_MARGIN_PX", "SAFETY_MARGIN_PX"]
+__all__ = ["board_windows", "board_pixels", "board_edge_pixels", "board_lines_mm",
+           "mirror_edge_pixels", "edge_mask", "segments_mask", "clip_segments_near", "view_box",
+           "merge_boxes", "mirror_paths", "clip_near", "blur_radius_norm", "FILTER_MARGIN_PX", "SAFETY_MARGIN_PX"]
 
 #: Pixel footprint plus Mitsuba's ``box`` filter (radius 0.5 px): a sample lands in its own
 #: pixel, at most half a pixel from the pixel centre.
@@ -267,35 +268,61 @@ def _grow(canvas: np.ndarray, r: int, off: int, width: int, height: int) -> np.n
     return out
 
 
-def edge_mask(poly_cam_mm: np.ndarray, K: np.ndarray, dist, width: int, height: int, *,
-              aperture_radius_mm: float = 0.0, focus_distance_mm: float = 1.0,
-              margin_px: float = SAFETY_MARGIN_PX, stretch: float | None = None,
-              samples_per_edge: int = 4096) -> np.ndarray:
-    """(height, width) bool: the pixels that the *edges* of a planar convex polygon (camera
-    frame, mm) can touch, padded as :func:`view_box` pads its box (the lens blur, the sample
-    spacing, the pixel footprint and ``margin_px``).
+def clip_segments_near(segments_cam_mm: np.ndarray, z_min_mm: float = NEAR_MM) -> np.ndarray:
+    """Clip line segments (camera frame, mm) to ``z >= z_min_mm``.
 
-    Edge samples beyond the film's largest normalised radius plus the blur are left out (they
-    cannot reach the film; the distortion is monotonic only over it)."""
+    Parameters
+    ----------
+    segments_cam_mm : (m, 2, 3) float
+        End points of each segment.
+
+    Returns
+    -------
+    (k, 2, 3) float
+        The parts in front of the near plane (segments wholly behind it are dropped).
+    """
+    S = np.asarray(segments_cam_mm, dtype=float).reshape(-1, 2, 3)
+    a, b = S[:, 0], S[:, 1]
+    za, zb = a[:, 2] - z_min_mm, b[:, 2] - z_min_mm
+    keep = (za >= 0) | (zb >= 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where((za >= 0) != (zb >= 0), za / (za - zb), 0.0)
+    hit = a + t[:, None] * (b - a)
+    a = np.where((za < 0)[:, None], hit, a)
+    b = np.where((zb < 0)[:, None], hit, b)
+    return np.stack([a, b], axis=1)[keep]
+
+
+def segments_mask(segments_cam_mm: np.ndarray, K: np.ndarray, dist, width: int, height: int, *,
+                  aperture_radius_mm: float = 0.0, focus_distance_mm: float = 1.0,
+                  margin_px: float = SAFETY_MARGIN_PX, stretch: float | None = None,
+                  samples_per_segment: int = 4096) -> np.ndarray:
+    """(height, width) bool: the pixels that line segments (camera frame, mm) can touch,
+    padded as :func:`view_box` pads its box (the lens blur, the sample spacing, the pixel
+    footprint and ``margin_px``).
+
+    Segment samples beyond the film's largest normalised radius plus the blur are left out
+    (they cannot reach the film; the distortion is monotonic only over it)."""
     import cv2
 
     K = np.asarray(K, dtype=float)
     out = np.zeros((height, width), bool)
-    P = clip_near(poly_cam_mm)
-    if len(P) < 3:
+    S = clip_segments_near(segments_cam_mm)
+    if len(S) == 0:
         return out
-    Q = P[:, :2] / P[:, 2:3]
-    rho = float(np.max(blur_radius_norm(aperture_radius_mm, focus_distance_mm, P[:, 2])))
+    # The blur |1/z - 1/s_f| is largest at an end point of a segment (1/z is monotonic on it).
+    rho = float(np.max(blur_radius_norm(aperture_radius_mm, focus_distance_mm, S[..., 2])))
     if stretch is None:
         stretch = _stretch(K, dist, width, height)
     border_xy = _to_norm(_film_border_px(width, height), K, dist)
     r_keep = float(np.max(np.hypot(border_xy[:, 0], border_xy[:, 1]))) + rho
-    t = np.arange(samples_per_edge + 1) / samples_per_edge
+    Q = S[..., :2] / S[..., 2:3]
+    t = np.arange(samples_per_segment + 1) / samples_per_segment
     runs, spacing = [], 0.0
-    for a, b in zip(Q, np.roll(Q, -1, axis=0)):
+    for a, b in Q:
         e = a[None, :] + t[:, None] * (b - a)[None, :]
         keep = np.hypot(e[:, 0], e[:, 1]) <= r_keep
-        # Runs of consecutive kept samples (an edge may leave the film's disk and come back).
+        # Runs of consecutive kept samples (a segment may leave the film's disk and come back).
         cuts = np.flatnonzero(np.diff(keep.astype(np.int8))) + 1
         for run_xy, run_keep in zip(np.split(e, cuts), np.split(keep, cuts)):
             if run_keep[0]:
@@ -314,6 +341,22 @@ def edge_mask(poly_cam_mm: np.ndarray, K: np.ndarray, dist, width: int, height: 
     polys = [np.rint((np.clip(uv, -big, big) + off) * 16).astype(np.int32) for uv in runs]
     cv2.polylines(canvas, polys, False, 1, lineType=cv2.LINE_8, shift=4)
     return _grow(canvas, r, off, width, height)
+
+
+def edge_mask(poly_cam_mm: np.ndarray, K: np.ndarray, dist, width: int, height: int, *,
+              aperture_radius_mm: float = 0.0, focus_distance_mm: float = 1.0,
+              margin_px: float = SAFETY_MARGIN_PX, stretch: float | None = None,
+              samples_per_edge: int = 4096) -> np.ndarray:
+    """(height, width) bool: the pixels that the *edges* of a planar convex polygon (camera
+    frame, mm) can touch, padded as :func:`view_box` pads its box: :func:`segments_mask` of
+    the edges of the polygon clipped to the near plane."""
+    P = clip_near(poly_cam_mm)
+    if len(P) < 3:
+        return np.zeros((height, width), bool)
+    return segments_mask(np.stack([P, np.roll(P, -1, axis=0)], axis=1), K, dist, width, height,
+                         aperture_radius_mm=aperture_radius_mm,
+                         focus_distance_mm=focus_distance_mm, margin_px=margin_px,
+                         stretch=stretch, samples_per_segment=samples_per_edge)
 
 
 def _intersect(a, b):
@@ -440,6 +483,37 @@ def board_pixels(rig, board, *, thin_lens: bool = True, max_bounces: int = 2, sc
     return np.column_stack([x, y])
 
 
+def _mirror_image(rig, k: int, T: np.ndarray, film, *, edges: bool, margin_px: float):
+    """Film mask of mirror ``k`` seen through the mirrors of ``T`` (``edges``: its edges'
+    padded pixels; else its padded filled image, its box where the outline is not known); all
+    False where it cannot be seen.  ``film`` as :func:`_film` returns it."""
+    K, dist, W, H, lens, stretch, R, t = film
+    X = np.asarray(rig.mirrors[k].corners_mm, dtype=float)
+    X = (X @ T[:3, :3].T + T[:3, 3]) @ R.T + t
+    if edges:
+        return edge_mask(X, K, dist, W, H, margin_px=margin_px, stretch=stretch, **lens)
+    box, mask = view_box(X, K, dist, W, H, margin_px=margin_px, stretch=stretch,
+                         outline=True, **lens)
+    out = np.zeros((H, W), bool)
+    if box is not None:
+        x0, y0, x1, y1 = box
+        out[y0:y1 + 1, x0:x1 + 1] = True if mask is None else mask[y0:y1 + 1, x0:x1 + 1]
+    return out
+
+
+def _through(rig, seq, film, margin_px: float):
+    """The pixels whose rays can go through the mirror sequence ``seq`` (object side first):
+    inside each of its mirrors' images, each seen through the mirrors after it; and the
+    unfolding transform of the mirrors in front of the object."""
+    _, _, W, H, _, _, _, _ = film
+    through = np.ones((H, W), bool)
+    T_after = np.eye(4)
+    for k in reversed(seq):
+        through &= _mirror_image(rig, k, T_after, film, edges=False, margin_px=margin_px)
+        T_after = T_after @ rig.mirrors[k].T
+    return through, T_after
+
+
 def mirror_edge_pixels(rig, *, thin_lens: bool = True, max_bounces: int = 2, scale: float = 1.0,
                        margin_px: float = SAFETY_MARGIN_PX) -> np.ndarray:
     """Pixels of a picture of ``rig`` without any board (its mirrors under a uniform ambient
@@ -460,33 +534,63 @@ def mirror_edge_pixels(rig, *, thin_lens: bool = True, max_bounces: int = 2, sca
     (n, 2) int
         ``(x, y)`` of each pixel once, row-major.
     """
-    K, dist, W, H, lens, stretch, R, t = _film(rig, scale, thin_lens)
-
-    def image(k, T, edges):
-        """Film mask of mirror ``k`` seen through the mirrors of ``T`` (its box where the
-        outline is not known); all False where it cannot be seen."""
-        X = np.asarray(rig.mirrors[k].corners_mm, dtype=float)
-        X = (X @ T[:3, :3].T + T[:3, 3]) @ R.T + t
-        if edges:
-            return edge_mask(X, K, dist, W, H, margin_px=margin_px, stretch=stretch, **lens)
-        box, mask = view_box(X, K, dist, W, H, margin_px=margin_px, stretch=stretch,
-                             outline=True, **lens)
-        out = np.zeros((H, W), bool)
-        if box is not None:
-            x0, y0, x1, y1 = box
-            out[y0:y1 + 1, x0:x1 + 1] = True if mask is None else mask[y0:y1 + 1, x0:x1 + 1]
-        return out
-
-    covered = np.zeros((H, W), bool)
+    film = _film(rig, scale, thin_lens)
+    covered = np.zeros((film[3], film[2]), bool)
     for seq, _ in mirror_paths(rig.mirrors, max_bounces):
-        # The rays that went through ``seq`` (object side first): inside each of its mirrors'
-        # images, each seen through the mirrors after it.
-        through = np.ones((H, W), bool)
-        T_after = np.eye(4)
-        for k in reversed(seq):
-            through &= image(k, T_after, False)
-            T_after = T_after @ rig.mirrors[k].T
+        through, T_after = _through(rig, seq, film, margin_px)
         for k in range(len(rig.mirrors)):
-            covered |= image(k, T_after, True) & through
+            covered |= _mirror_image(rig, k, T_after, film, edges=True,
+                                     margin_px=margin_px) & through
+    y, x = np.nonzero(covered)
+    return np.column_stack([x, y])
+
+
+def board_lines_mm(board) -> np.ndarray:
+    """(m, 2, 3) segments, board frame (mm), across which the printed side's albedo can
+    change: every line of the squares' grid, over the whole pattern, and the printed area's
+    outline (where the board ends)."""
+    s = float(board.square_mm)
+    X, Y = board.squares_x * s, board.squares_y * s
+    m = float(board.margin_mm)
+    xs, ys = np.arange(board.squares_x + 1) * s, np.arange(board.squares_y + 1) * s
+    vert = [[[x, 0.0, 0.0], [x, Y, 0.0]] for x in xs]
+    horiz = [[[0.0, y, 0.0], [X, y, 0.0]] for y in ys]
+    c = [[-m, -m, 0.0], [X + m, -m, 0.0], [X + m, Y + m, 0.0], [-m, Y + m, 0.0]]
+    outline = [[c[i], c[(i + 1) % 4]] for i in range(4)]
+    return np.array(vert + horiz + outline, dtype=float)
+
+
+def board_edge_pixels(rig, board, *, thin_lens: bool = True, max_bounces: int = 2,
+                      scale: float = 1.0, margin_px: float = SAFETY_MARGIN_PX) -> np.ndarray:
+    """Pixels of a picture of ``rig`` + ``board`` whose rays may meet different albedos or
+    different things: the images of the board's square edges and outline
+    (:func:`board_lines_mm`), seen directly and through every mirror sequence the renderer
+    follows (each kept where the rays can go through that sequence's mirrors), padded as
+    :func:`view_box` pads (the lens blur, the sample spacing, the pixel footprint and
+    ``margin_px``), and the mirrors' edges (:func:`mirror_edge_pixels`).
+
+    Elsewhere on the board every ray of a pixel meets one square of the print (one albedo),
+    through one mirror sequence.  Same parameters as :func:`board_pixels`.
+
+    Returns
+    -------
+    (n, 2) int
+        ``(x, y)`` of each pixel once, row-major.
+    """
+    film = _film(rig, scale, thin_lens)
+    K, dist, W, H, lens, stretch, R, t = film
+    lines = board_lines_mm(board)
+    T_b = np.asarray(board.T_world_board, dtype=float)
+    world = lines @ T_b[:3, :3].T + T_b[:3, 3]
+    covered = np.zeros((H, W), bool)
+    for seq, T in mirror_paths(rig.mirrors, max_bounces):
+        through = _through(rig, seq, film, margin_px)[0] if seq else True
+        X = (world @ T[:3, :3].T + T[:3, 3]) @ R.T + t
+        covered |= segments_mask(X, K, dist, W, H, margin_px=margin_px, stretch=stretch,
+                                 **lens) & through
+    if rig.mirrors:
+        px = mirror_edge_pixels(rig, thin_lens=thin_lens, max_bounces=max_bounces, scale=scale,
+                                margin_px=margin_px)
+        covered[px[:, 1], px[:, 0]] = True
     y, x = np.nonzero(covered)
     return np.column_stack([x, y])

@@ -18,7 +18,13 @@ only the pixels where its board can change the picture — seen directly and thr
 mirror sequence, padded by the lens blur (:func:`lts360.simulator.board_window.board_windows`) —
 at the same sample count, ray for ray as a full render (:func:`lts360.simulator.render.render_pixels`).
 Outside those windows the board changes nothing, so the image is that of a full render
-(another noise realisation of the same expected image).  The scene is loaded once per mirror
+(another noise realisation of the same expected image).  The camera shots (laser off, mirrors
+covered: the board is the scene's only shape) are rendered with an estimator of the ambient
+light that samples the board's BSDF (:func:`_flat_integrator`), which has no variance where all
+of a pixel's rays meet one square of the print: those pixels take one sample, their exact
+expected value; the pixels across the squares' edges and the board's outline
+(:func:`lts360.simulator.board_window.board_edge_pixels`) a quarter of the sample count, with
+less noise than the laser integrator at the full count.  The scene is loaded once per mirror
 configuration, sample count, laser state and board print; each next board of that print is
 moved into it (``mi.traverse``): the image of a freshly loaded scene to float32 rounding (the
 moved board's transform is derived in the JIT's arithmetic; 2.4e-7 W m⁻² sr⁻¹ at most on a
@@ -27,6 +33,7 @@ full-size 64-spp camera board).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import replace
 from pathlib import Path
 
@@ -34,7 +41,7 @@ import numpy as np
 
 from lts360.scenes.calib_plan import BoardShot
 from lts360.scenes.rig import Rig
-from lts360.simulator.board_window import board_pixels, mirror_edge_pixels
+from lts360.simulator.board_window import board_edge_pixels, board_pixels, mirror_edge_pixels
 from lts360.simulator.frame import sensor_image
 from lts360.simulator.io import rig_truth, write_json, write_png
 from lts360.simulator.render import RenderResult, prepare_scene, render_pixels, render_radiance
@@ -44,6 +51,20 @@ __all__ = ["render_calibration_images", "MANIFEST_NAME"]
 
 MANIFEST_NAME = "manifest.json"
 
+
+#: The camera shots' edge pixels are rendered with :func:`_flat_integrator` at this fraction of
+#: the sample count: its noise there comes from the box filter's and the lens's coverage of the
+#: squares' edges only (the laser integrator adds that of its ambient estimate).  Measured on
+#: the edge pixels of the paper rig's first two camera boards (1280 × 1024; 2026-12-05): noise
+#: 0.0168 and 0.0159 W m⁻² sr⁻¹ at 16 spp against 0.0255 and 0.0215 for the laser integrator
+#: at 64 (at 8 spp: 0.0256, 0.0238), the means within 1.1 standard errors.
+FLAT_EDGE_SPP_DIVISOR = 4
+#: Safety margin (px) of the camera shots' edge pixels (:func:`_split_pixels`).  With none, on
+#: the 30 camera boards of the demo (1280 × 1024, 2026-12-05), :func:`_flat_integrator` at 1
+#: and at 64 spp differed on no pixel outside the edge pixels by more than one sample's rare
+#: miss (one sample of value zero, likely a shadow ray meeting the board itself — not traced
+#: down: 25 pixels in 8.2 M, by 1/64 of their value); one pixel more is kept.
+FLAT_EDGE_MARGIN_PX = 1.0
 
 #: Sampler seed of the pictures without a board (one per mirror configuration and spp).
 CONTEXT_SEED = 4_000_000_000
@@ -76,9 +97,14 @@ def composite(base: RenderResult, pixels_xy: np.ndarray, radiance: np.ndarray,
 
 
 def _render(rig, board, *, laser_on, spp, seed, thin_lens, mirrors=True, context=None,
-            scale=1.0):
+            scale=1.0, flat_interior=False):
     """One picture; ``context`` (a dict, filled here) holds the board-less pictures for
-    windowed rendering, ``None`` renders the full frame; ``scale`` for tests."""
+    windowed rendering, ``None`` renders the full frame; ``scale`` for tests.
+
+    ``flat_interior`` (windowed, laser off, no mirrors: the camera shots): the board is
+    rendered with :func:`_flat_integrator`, its pixels away from its square edges and outline
+    at one sample per pixel (their expected value, exactly), the others
+    (:func:`_split_pixels`) at ``spp // FLAT_EDGE_SPP_DIVISOR``."""
     scene_rig = rig if mirrors else replace(rig, mirrors=())
     spec = SceneSpec(scene_rig, (), ambient="bright", targets=(board,))
     if context is None:
@@ -90,10 +116,98 @@ def _render(rig, board, *, laser_on, spp, seed, thin_lens, mirrors=True, context
         context[key] = _context_picture(scene_rig, spp=spp, thin_lens=thin_lens, scale=scale)
         seconds = context[key].seconds
     px = board_pixels(scene_rig, board, thin_lens=thin_lens, scale=scale)
-    prepared = _prepared(context.setdefault("scenes", {}), spec, board, key=key + (bool(laser_on),))
-    rad, las, sec = render_pixels(spec, px, spp=spp, seed=seed, thin_lens=thin_lens,
-                                  laser_on=laser_on, scale=scale, prepared=prepared)
-    return composite(context[key], px, rad, las, seconds=seconds + sec, seed=seed)
+    scenes = context.setdefault("scenes", {})
+    if not flat_interior:
+        prepared = _prepared(scenes, spec, board, key=key + (bool(laser_on),))
+        rad, las, sec = render_pixels(spec, px, spp=spp, seed=seed, thin_lens=thin_lens,
+                                      laser_on=laser_on, scale=scale, prepared=prepared)
+        return composite(context[key], px, rad, las, seconds=seconds + sec, seed=seed)
+    if laser_on or scene_rig.mirrors:
+        raise ValueError("flat_interior: only for a picture with the laser off and no mirrors")
+    edge, flat = _split_pixels(scene_rig, board, px, thin_lens=thin_lens, scale=scale)
+    rad, las = [], []
+    for pixels, n in ((edge, max(1, int(spp) // FLAT_EDGE_SPP_DIVISOR)), (flat, 1)):
+        scene = _prepared(scenes, spec, board, key=key[:1] + (n,) + key[2:] + ("flat",))[0]
+        r, la, sec = render_pixels(spec, pixels, spp=n, seed=seed, thin_lens=thin_lens,
+                                   laser_on=False, scale=scale,
+                                   prepared=(scene, _flat_integrator()))
+        rad.append(r)
+        las.append(la)
+        seconds += sec
+    return composite(context[key], np.vstack([edge, flat]), np.concatenate(rad),
+                     np.concatenate(las), seconds=seconds, seed=seed)
+
+
+def _split_pixels(scene_rig, board, px, *, thin_lens, scale):
+    """The board's pixels ``px`` split into ``(edge, flat)``: ``edge`` those whose rays may
+    meet different albedos or the board's outline
+    (:func:`lts360.simulator.board_window.board_edge_pixels`), ``flat`` the others, where
+    every ray of a pixel meets one square of the print."""
+    edges = board_edge_pixels(scene_rig, board, thin_lens=thin_lens, scale=scale,
+                              margin_px=FLAT_EDGE_MARGIN_PX)
+    px = np.asarray(px, dtype=np.int64).reshape(-1, 2)
+    if len(edges) == 0:
+        return px[:0], px
+    mask = np.zeros((int(px[:, 1].max(initial=0)) + 1, int(px[:, 0].max(initial=0)) + 1), bool)
+    e = edges[(edges[:, 0] < mask.shape[1]) & (edges[:, 1] < mask.shape[0])]
+    mask[e[:, 1], e[:, 0]] = True
+    on_edge = mask[px[:, 1], px[:, 0]]
+    return px[on_edge], px[~on_edge]
+
+
+@functools.lru_cache(maxsize=None)
+def _flat_integrator_class(variant: str):
+    """The class of :func:`_flat_integrator` for the Mitsuba ``variant`` set now."""
+    import drjit as dr
+    import mitsuba as mi
+
+    class FlatAmbientIntegrator(mi.SamplingIntegrator):
+        """Ambient light on a diffuse surface by BSDF (cosine) sampling: ``A D E`` and ``A E``
+        paths, laser off, no mirrors."""
+
+        def __init__(self, props=None):
+            super().__init__(props if props is not None else mi.Properties())
+
+        def aov_names(self):
+            return ["laser"]
+
+        def sample(self, scene, sampler, ray, medium=None, active=True):
+            env = scene.environment()
+            ray = mi.Ray3f(ray)
+            active = mi.Bool(active)
+            si = scene.ray_intersect(ray, active)
+            hit = active & si.is_valid()
+            L = dr.select(active & ~hit, env.eval(si, active & ~hit), 0.0)
+            bsdf = si.bsdf(ray)
+            bs, w = bsdf.sample(mi.BSDFContext(), si, sampler.next_1d(hit),
+                                sampler.next_2d(hit), hit)
+            ok = hit & (bs.pdf > 0)
+            shadow = si.spawn_ray(si.to_world(bs.wo))
+            ok &= ~scene.ray_test(shadow, ok)
+            far = dr.zeros(mi.SurfaceInteraction3f)
+            far.wi = -shadow.d
+            L += dr.select(ok, w * env.eval(far, ok), 0.0)
+            return L, mi.Bool(True), [dr.zeros(mi.Float, dr.width(si.t))]
+
+    return FlatAmbientIntegrator
+
+
+def _flat_integrator():
+    """An integrator for the flat part of a board under the ambient light, laser off, no
+    mirrors (:func:`_render`'s ``flat_interior``).
+
+    Light paths: ``A E`` (a camera ray that escapes sees the environment) and ``A D E`` — the
+    laser integrator's (:mod:`lts360.simulator.integrator`) — but the ambient light on the
+    diffuse board is estimated by sampling the BSDF (cosine-weighted) instead of the
+    environment (uniform over the sphere): the same expectation, ``ρ L_env`` where nothing
+    hides the sky, and no variance at all in a mirror-less scene, where nothing can (the board
+    is the only shape, and planar): a sample's weight is the albedo ``ρ`` it meets.  A pixel
+    whose rays all meet one square of the print therefore has its exact expected value for
+    one sample, which the laser integrator's estimate scatters about (1.2 % of the light
+    squares' level at 64 spp on the paper rig's camera board, 2026-12-05)."""
+    import mitsuba as mi
+
+    return _flat_integrator_class(mi.variant())()
 
 
 def _context_picture(scene_rig, *, spp, thin_lens, scale) -> RenderResult:
@@ -132,7 +246,7 @@ def _prepared(scenes: dict, spec: SceneSpec, board, *, key: tuple):
                       float(board.light_reflectance))
     if full_key not in scenes:
         scenes[full_key] = prepare_scene(spec, spp=kw_spp, thin_lens=kw_thin, scale=kw_scale,
-                                         laser_on=key[4])
+                                         laser_on=key[4] is True)
         return scenes[full_key]
     prepared = scenes[full_key]
     params = mi.traverse(prepared[0])
@@ -229,7 +343,8 @@ def render_calibration_images(rig: Rig, shots: list[BoardShot], out_dir, *, nois
             K, rendered_spp = on.K, on.spp
         else:
             res = _render(rig, shot.board, laser_on=False, spp=spp_k, seed=s, thin_lens=thin_lens,
-                          mirrors=not shot.mirrors_covered, context=context)
+                          mirrors=not shot.mirrors_covered, context=context,
+                          flat_interior=shot.mirrors_covered)
             img, _, _ = sensor_image(rig, res, noise=noise, seed=s)
             if shot.mirrors_covered:
                 entry["mirrors_covered"] = True
@@ -246,5 +361,8 @@ def render_calibration_images(rig: Rig, shots: list[BoardShot], out_dir, *, nois
     truth = rig_truth(rig, K, (rig.camera.width_px, rig.camera.height_px))
     truth.update({"boards": truth_boards, "render": {"noise": noise, "seed": seed, "spp": spp,
                                                      "target_spp": target_spp or spp,
-                                                     "thin_lens": thin_lens}})
+                                                     "thin_lens": thin_lens,
+                                                     "camera_shots_flat": None if not windowed else
+                                                     {"edge_spp": max(1, spp // FLAT_EDGE_SPP_DIVISOR),
+                                                      "flat_spp": 1}}})
     return {"manifest": manifest, "truth": truth}

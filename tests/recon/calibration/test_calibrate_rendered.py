@@ -98,6 +98,31 @@ def test_estimates_are_near_the_truth(calibrated):
     assert np.linalg.norm(acc["measurement_frame"]["origin_um"]) < 700
 
 
+def test_the_shots_fitted_on_two_threads_give_the_serial_result(calibrated, monkeypatch):
+    """The mirror shots' boards and the laser lines are found shot by shot on two threads
+    (``FIT_THREADS``): the same calibration as one after the other, up to OpenCV's
+    multithreaded summation order (as below), the same shots kept and skipped."""
+    import lts360.recon.calibration.from_images as fi
+
+    out, _ = calibrated
+    images = fi.read_calibration_images(out / "images")
+    got = {}
+    for n in (1, 2):
+        monkeypatch.setattr(fi, "FIT_THREADS", n)
+        got[n] = fi.calibrate_rig(images)
+    a, b = got[1], got[2]
+    assert a.skipped == b.skipped and list(a.laser_lines) == list(b.laser_lines)
+    assert {k: v[0] for k, v in a.mirror_observations.items()} == \
+        {k: v[0] for k, v in b.mirror_observations.items()}
+    ca, cb = a.calibration, b.calibration
+    np.testing.assert_allclose(ca.K, cb.K, rtol=1e-6)
+    for ma, mb in zip(ca.mirrors, cb.mirrors):
+        np.testing.assert_allclose(ma.n, mb.n, atol=1e-5)
+        assert abs(ma.d_mm - mb.d_mm) < 1e-3
+    np.testing.assert_allclose(ca.laser_plane[0], cb.laser_plane[0], atol=1e-5)
+    assert abs(ca.laser_plane[1] - cb.laser_plane[1]) < 1e-3
+
+
 @pytest.mark.slow
 def test_the_images_folder_alone_reproduces_the_calibration(calibrated, tmp_path):
     """`--images DIR`: nothing rendered, the same result from the same files."""

@@ -149,7 +149,9 @@ def test_the_band_model_jacobian_is_its_derivative():
 
 def test_the_board_residuals_equal_the_supersampled_albedo():
     """The board image's residuals from the dark squares' pixel share equal those of the
-    albedo averaged sample by sample (the pixel mean is linear in ρ)."""
+    albedo averaged sample by sample (the pixel mean and the blur are linear in ρ), also when
+    the blur kept for a σ is reused (same σ, other k, b, ρ; a negative σ is its absolute
+    value)."""
     from lts360.recon.calibration.laser_line_model import _board_residuals, _pixel_mean
 
     rng = np.random.default_rng(4)
@@ -158,8 +160,10 @@ def test_the_board_residuals_equal_the_supersampled_albedo():
     crop = rng.normal(size=(h, w))
     inside = rng.random((h, w)) > 0.3
     res = _board_residuals(_pixel_mean(dark.astype(float), h, w), crop, inside)
-    for p in ([1.5, 2.0, 0.1, 0.05], [0.7, 1.1, -0.2, 0.3]):
+    for p in ([1.5, 2.0, 0.1, 0.05], [0.7, 1.1, -0.2, 0.3], [1.5, 0.4, 0.3, 0.6],
+              [-0.7, 2.2, 0.0, 0.9]):
         sigma, k, b, rho = p
+        sigma = abs(sigma)
         old = (k * ndimage.gaussian_filter(_pixel_mean(np.where(dark, rho, 1.0), h, w), sigma)
                + b - crop)[inside]
         assert np.allclose(res(np.array(p)), old, rtol=0, atol=1e-12)

@@ -34,6 +34,7 @@ Nothing here reads ground truth.
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -234,6 +235,10 @@ def select_laser_lines(lines: dict[str, LaserLine], skipped: dict[str, str]
 # Rounds of the camera calibration on the boards' image model (see calibrate_rig).
 CAMERA_MODEL_ROUNDS = 0
 
+#: Threads for the per-shot steps of :func:`calibrate_rig` (the mirror shots' boards, the
+#: laser lines): at most two, the cores of the machines the demo is timed on.
+FIT_THREADS = min(2, os.cpu_count() or 1)
+
 
 def calibrate_rig(images: CalibrationImages, *, tangential: bool = False,
                   progress=None, use_laser_boards_for_mirrors: bool = True,
@@ -334,20 +339,22 @@ def _mirror_observations(images: CalibrationImages, K, dist, use_laser_boards: b
     obs_names: dict[str, list[str]] = {}
     laser_obs: dict[str, MirrorObservation] = {}
     board_images: dict[str, np.ndarray] = {}  # laser shots' board images, read once
-    for s in images.shots:
-        # Mirror shots, and laser shots whose board is seen in a mirror too: both show a
-        # real and a virtual board.
-        if s["kind"] == "laser" and s.get("mirror"):
-            board_images[s["name"]] = _read(images.root / s["image_board"])
-            ob = detect_real_and_virtual(board_images[s["name"]], board, K, dist)
+    # Mirror shots, and laser shots whose board is seen in a mirror too: both show a real and
+    # a virtual board.
+    shots = [s for s in images.shots
+             if s["kind"] == "mirror" or (s["kind"] == "laser" and s.get("mirror"))]
+
+    def detect(s):
+        image = _read(images.root / s["image_board" if s["kind"] == "laser" else "image"])
+        return image, detect_real_and_virtual(image, board, K, dist)
+
+    for s, (image, ob) in zip(shots, _map(detect, shots)):
+        if s["kind"] == "laser":
+            board_images[s["name"]] = image
             if ob is not None:
                 laser_obs[s["name"]] = ob
-        elif s["kind"] == "mirror":
-            ob = detect_real_and_virtual(_read(images.root / s["image"]), board, K, dist)
-            if ob is None:
-                skipped[s["name"]] = "real and virtual board not both found"
-        else:
-            continue
+        elif ob is None:
+            skipped[s["name"]] = "real and virtual board not both found"
         if ob is None or (s["kind"] == "laser" and not use_laser_boards):
             continue
         obs.setdefault(s["mirror"], []).append(ob)
@@ -355,6 +362,23 @@ def _mirror_observations(images: CalibrationImages, K, dist, use_laser_boards: b
     if not obs:
         raise ValueError("mirror calibration: no image shows a board directly and in a mirror")
     return obs, obs_names, laser_obs, board_images
+
+
+def _map(fn, items: list) -> list:
+    """``[fn(x) for x in items]``, run on :data:`FIT_THREADS` threads (the shots are
+    independent, each result depends on its own shot only: the same results in the same
+    order; the first exception is raised).  OpenCV's detectors, SciPy's filters and NumPy's
+    arithmetic on large arrays release Python's lock, so after the rendering a second core
+    shares these steps.  Measured with ``benchmarks/bench_calibration.py --seed 1`` on the
+    2-core machine while other work shared it (2026-12-05): the mirror shots' boards 6.7 s of
+    CPU in 4.2 s, the laser lines 3.7 s in 1.9 s (on one thread: 6.0 s in 6.1 s, 5.1 s in
+    5.7 s); the wall times under such load are only indicative."""
+    if FIT_THREADS <= 1 or len(items) <= 1:
+        return [fn(x) for x in items]
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=FIT_THREADS) as pool:
+        return list(pool.map(fn, items))
 
 
 def _fit_mirrors(obs, obs_names, laser_obs, board, K, dist, skipped: dict[str, str], say):
@@ -407,21 +431,29 @@ def _laser_lines(images: CalibrationImages, K, dist, planes, laser_obs, board_im
 
     Shots whose line is not found are added to ``skipped``; ``board_images`` is emptied.
     """
-    lines: dict[str, LaserLine] = {}
-    for s in images.shots:
-        if s["kind"] != "laser":
-            continue
-        image_board = board_images.pop(s["name"], None)
+    shots = [s for s in images.shots if s["kind"] == "laser"]
+    given = {s["name"]: board_images.pop(s["name"], None) for s in shots}
+    board_images.clear()
+
+    def line(s):
+        image_board = given[s["name"]]
         if image_board is None:
             image_board = _read(images.root / s["image_board"])
         pose, views = _laser_board_pose(s, images.board, K, dist, planes, laser_obs, rejected)
         try:
-            lines[s["name"]] = laser_line_points(_read(images.root / s["image_on"]),
-                                                 _read(images.root / s["image_off"]),
-                                                 image_board, images.board, K, dist,
-                                                 pose=pose, pose_views=views)
+            return laser_line_points(_read(images.root / s["image_on"]),
+                                     _read(images.root / s["image_off"]),
+                                     image_board, images.board, K, dist,
+                                     pose=pose, pose_views=views)
         except ValueError as exc:
-            skipped[s["name"]] = "; ".join(filter(None, (skipped.get(s["name"]), str(exc))))
+            return exc
+
+    lines: dict[str, LaserLine] = {}
+    for s, got in zip(shots, _map(line, shots)):
+        if isinstance(got, ValueError):
+            skipped[s["name"]] = "; ".join(filter(None, (skipped.get(s["name"]), str(got))))
+        else:
+            lines[s["name"]] = got
     return lines
 
 

@@ -80,11 +80,21 @@ def _board_residuals(dark_share: np.ndarray, crop_b: np.ndarray, inside: np.ndar
     ``p = (σ, k, b, ρ)``, with ``⟨albedo⟩ = 1 − (1 − ρ) · dark_share`` (the pixel mean of an
     albedo of ρ on the dark squares and 1 elsewhere is linear in ρ, so the supersampled
     squares are averaged once, not at every evaluation).  ``dark_share``: (h, w) the pixel
-    mean of the dark squares' indicator."""
+    mean of the dark squares' indicator.
+
+    The blur is linear and keeps a constant (its kernel sums to one, the border reflected),
+    so ``G_σ ∗ ⟨albedo⟩ = 1 − (1 − ρ) · G_σ ∗ dark_share``: one blur per σ, kept for the
+    evaluations at the same σ (the optimiser's finite differences in k, b and ρ)."""
+    blurred: dict[float, np.ndarray] = {}
+
     def board_res(p):
         sigma, k, b, rho = p
-        a = 1.0 - (1.0 - rho) * dark_share
-        return (k * ndimage.gaussian_filter(a, abs(sigma)) + b - crop_b)[inside]
+        sigma = abs(float(sigma))
+        if sigma not in blurred:
+            if len(blurred) > 4:
+                blurred.clear()
+            blurred[sigma] = ndimage.gaussian_filter(dark_share, sigma)
+        return (k * (1.0 - (1.0 - rho) * blurred[sigma]) + b - crop_b)[inside]
     return board_res
 
 
