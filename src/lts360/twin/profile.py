@@ -25,7 +25,7 @@ from scipy.ndimage import median_filter, uniform_filter1d
 from lts360.geometry.fit import fit_circle
 
 __all__ = ["SectionProfile", "section_profile", "NOISE_TARGET_UM", "MAX_SMOOTH_DEG", "prism_mesh", "ray_radii", "AxialForm",
-           "axial_form", "loft_mesh"]
+           "axial_form", "loft_mesh", "view_offsets", "view_profile"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -347,3 +347,122 @@ def ray_radii(vertices_mm, theta_rad, near_mm=None, *, chunk: int = 512) -> np.n
             out[a:a + chunk] = t[np.arange(len(k)), k]
     out[~np.isfinite(out)] = np.nan
     return out
+
+
+#: Rays a shared curve's slope is taken over (median), and the steepest incidence of a ray on
+#: it (the views measure up to ~70° of incidence) in :func:`view_offsets`.
+SLOPE_RAYS = 11
+MAX_INCIDENCE_DEG = 75.0
+
+
+def _ray_jacobian(theta: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """(n, 2): how the radius along each ray from the origin moves when the curve ``r(θ)`` is
+    translated by ``t`` (first order): ``∂r/∂t = u − (r′/r) w``, ``u`` the ray's direction and
+    ``w`` its normal (``n ∝ r u − r′ w`` is the curve's normal; ``Δr = (n·t)/(n·u)``)."""
+    u = np.column_stack([np.cos(theta), np.sin(theta)])
+    w = np.column_stack([-np.sin(theta), np.cos(theta)])
+    if r.size < 2:
+        return u
+    # the slope of the curve, not of a spike: a median over SLOPE_RAYS rays first, and the
+    # ray's incidence on the curve kept below MAX_INCIDENCE_DEG
+    r_m = median_filter(r, size=min(SLOPE_RAYS, r.size) | 1, mode="nearest")
+    k = np.clip(np.gradient(r_m, theta) / r_m, -np.tan(np.radians(MAX_INCIDENCE_DEG)),
+                np.tan(np.radians(MAX_INCIDENCE_DEG)))
+    return u - k[:, None] * w
+
+
+def view_offsets(theta_rad, radii_mm: dict, *, min_overlap: int = 10, ridge: float = 1e-3,
+                 iters: int = 5) -> dict:
+    """Per view the translation (mm, in the rays' plane) that best aligns the views where
+    they measured the same rays.
+
+    Parameters
+    ----------
+    theta_rad : (n,) float
+        The rays (from the origin), increasing.
+    radii_mm : dict name -> (n,) float
+        Each view's radius along the rays, NaN where it has none.
+    min_overlap : int
+        A pair of views sharing fewer rays than this does not count.
+    ridge : float
+        Weight (per ray, relative) pulling each translation towards 0: it fixes what the
+        overlaps leave free (their common translation, and a component along a short overlap).
+    iters : int
+        Reweighting passes (Tukey's biweight at 4.685 robust σ).
+
+    For views ``a``, ``b`` and every shared ray, ``r_b − r_a = J·(t_b − t_a)`` with ``J`` the
+    ray's Jacobian (:func:`_ray_jacobian`, from the pair's mean curve), solved jointly by
+    robust least squares with the ridge: the minimum-norm solution has ``Σ t = 0``.  A view
+    without a shared ray keeps ``t = 0``.  Exact for data that follow the linear model; a
+    translated circle about the origin is recovered to ``O(|t|² / R)``.
+    """
+    th = np.asarray(theta_rad, float).ravel()
+    names = list(radii_mm)
+    m = 2 * len(names)
+    blocks, rhs = [], []
+    for i, a in enumerate(names):
+        ra = np.asarray(radii_mm[a], float).ravel()
+        for b in names[i + 1:]:
+            rb = np.asarray(radii_mm[b], float).ravel()
+            both = np.isfinite(ra) & np.isfinite(rb)
+            if both.sum() < max(int(min_overlap), 3):
+                continue
+            mean = np.where(both, 0.5 * (ra + rb), np.nan)
+            J = np.full((th.size, 2), np.nan)
+            idx = np.flatnonzero(both)
+            # the slope along each run of shared rays (a gap's two sides are not neighbours)
+            for run in np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1):
+                J[run] = _ray_jacobian(th[run], mean[run])
+            A = np.zeros((idx.size, m))
+            A[:, 2 * names.index(b):2 * names.index(b) + 2] = J[idx]
+            A[:, 2 * i:2 * i + 2] = -J[idx]
+            blocks.append(A)
+            rhs.append(rb[idx] - ra[idx])
+    if not blocks:
+        return {n: np.zeros(2) for n in names}
+    A, y = np.vstack(blocks), np.concatenate(rhs)
+    lam = np.sqrt(float(ridge) * len(y) / m)
+    w = np.ones_like(y)
+    x = np.zeros(m)
+    for _ in range(int(iters)):
+        sw = np.sqrt(w)
+        x = np.linalg.lstsq(np.vstack([A * sw[:, None], lam * np.eye(m)]),
+                            np.concatenate([y * sw, np.zeros(m)]), rcond=None)[0]
+        res = y - A @ x
+        s = 1.4826 * np.median(np.abs(res - np.median(res)))
+        if not s > 0:
+            break
+        q = res / (4.685 * s)
+        w = np.where(np.abs(q) < 1, (1 - q * q) ** 2, 0.0)
+    return {n: x[2 * k:2 * k + 2].copy() for k, n in enumerate(names)}
+
+
+def view_profile(points_by_view: dict, offsets: dict, name: str, *, cover_deg: float = 1.0,
+                 **kwargs) -> SectionProfile:
+    """The section as view ``name`` measured it: its own points wherever it has them, and the
+    other views' points, moved onto it by their :func:`view_offsets` (``p − t_j + t_name``),
+    only where it has none (φ bins of ``cover_deg`` about the circle through all the moved
+    points, its own bins widened by one each side).  ``kwargs`` go to
+    :func:`section_profile`.
+
+    Each view's twin is this profile: it lies where the view saw the section (the calibration's
+    errors and the view's own bias included), without the seams of the others' points where
+    they meet its own; the others only close it.
+    """
+    t = {n: np.asarray(offsets.get(n, np.zeros(2)), float) for n in points_by_view}
+    own = np.asarray(points_by_view[name], float).reshape(-1, 2)
+    others = [np.asarray(p, float).reshape(-1, 2) - t[n] + t[name]
+              for n, p in points_by_view.items() if n != name]
+    others = np.concatenate(others) if others else np.zeros((0, 2))
+    if len(own) >= 3 and len(others):
+        c = fit_circle(np.concatenate([own, others])).center_mm
+        n_bins = max(1, int(round(360.0 / float(cover_deg))))
+
+        def bins(p):
+            a = np.mod(np.arctan2(p[:, 1] - c[1], p[:, 0] - c[0]), 2 * np.pi)
+            return np.minimum((a / (2 * np.pi) * n_bins).astype(np.int64), n_bins - 1)
+
+        covered = np.bincount(bins(own), minlength=n_bins) > 0
+        covered = covered | np.roll(covered, 1) | np.roll(covered, -1)
+        others = others[~covered[bins(others)]]
+    return section_profile(np.concatenate([own, others]), **kwargs)
