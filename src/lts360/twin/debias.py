@@ -441,7 +441,12 @@ class TwinCorrector:
         if self.axial_reach_mm <= 0:
             return
         try:
-            prof = self._profile(result, self._offsets(result))
+            # as measured, not aligned by the views' offsets: the offsets are each section's
+            # own (a shiny surface's views disagree by ~20 µm, differently from section to
+            # section), and aligning by them gave neighbours 0.5 mm apart false slopes and
+            # curvatures (the alu pipe's crest +40 µm); a calibration's error is the same
+            # in every section of a scan and cancels in the form as measured
+            prof = self._profile(result)
         except ValueError:
             prof = None
         if prof is not None and np.any(origin_mm):
