@@ -147,36 +147,53 @@ def test_placed_undoes_the_compensation_and_keeps_the_faces():
                        _uncompensated(np.asarray(mesh.vertices)[:, :2], cal, "left", True))
 
 
-def _arc_points(c, r, lo_deg, hi_deg, n=3000):
-    a = np.radians(np.linspace(lo_deg, hi_deg, n))
-    return np.column_stack([c[0] + r * np.cos(a), c[1] + r * np.sin(a)])
+def _circle_profile(c, r, n=1440):
+    phi = (np.arange(n) + 0.5) * 2 * np.pi / n
+    return SectionProfile(np.asarray(c, float), phi, np.full(n, float(r)), 1.0, 0.0)
 
 
-def test_a_views_profile_is_its_own_points_closed_by_the_others_moved_onto_it():
-    """Two views of a Ø12 circle, B's points 60 µm off (a calibration's error) and 5 µm
-    larger (its own bias): A's profile is A's circle where A has points and B's moved onto A
-    elsewhere (5 µm larger there, no 60 µm seam); B's is B's own circle where B has points."""
-    from lts360.twin.profile import view_profile
+def test_a_placed_profile_is_the_common_one_moved_and_bent_as_the_view_measured_it():
+    """A view's points on a Ø12 circle 60 µm off (a calibration's error) and 5 µm larger over
+    its arc, with a quadratic departure of ±3 µm along it (a smooth distortion) and a glint's
+    ripple of 4 µm at 2.5° (its own bias): the placed profile is the common circle moved by
+    the offset and bent by the smooth part within 0.3 µm on the arc, held at the arc's ends
+    beyond it; the ripple is not carried (within 0.3 µm of the smooth curve)."""
+    from lts360.twin.profile import placed_profile
 
-    tb = np.array([0.06, 0.0])
-    pts = {"A": _arc_points((0.0, 0.0), 6.0, 0.0, 200.0),
-           "B": _arc_points(tb, 6.005, 150.0, 360.0)}
-    offsets = {"A": np.zeros(2), "B": tb}
-    pa = view_profile(pts, offsets, "A", noise_target_um=None)
-    deg = np.degrees(pa.phi_rad)
-    # radii about A's circle's centre (the profile's own centre is a fit of both)
-    ra = ray_radii(pa.vertices_mm, pa.phi_rad)
-    own = (deg > 5) & (deg < 195)
-    gap = (deg > 215) & (deg < 345)
-    assert np.allclose(ra[own], 6.0, atol=2e-4)
-    assert np.allclose(ra[gap], 6.005, atol=2e-4)
-    pb = view_profile(pts, offsets, "B", noise_target_um=None)
-    rb = ray_radii(pb.vertices_mm - tb, pb.phi_rad)
-    assert np.allclose(rb[(deg > 155) & (deg < 355)], 6.005, atol=2e-4)
-    assert np.allclose(rb[(deg > 15) & (deg < 135)], 6.0, atol=2e-4)  # A's moved onto B
-    # without offsets the seam stays: B's points 60 µm off where they close A
-    seam = view_profile(pts, {}, "A", noise_target_um=None)
-    assert np.max(np.abs(ray_radii(seam.vertices_mm, seam.phi_rad)[gap] - 6.005)) > 0.03
+    common = _circle_profile((0.0, 0.0), 6.0)
+    t = np.array([0.06, -0.02])
+    a = np.radians(np.linspace(-60.0, 80.0, 4000))
+    mid = np.radians(10.0)
+    x = (a - mid) / np.pi
+    smooth = 0.005 + 0.003 * (2 * (x / x.max()) ** 2 - 1)
+    ripple = 0.004 * np.sin(a * 360.0 / 2.5)
+    pts = t + (6.0 + smooth + ripple)[:, None] * np.column_stack([np.cos(a), np.sin(a)])
+    got = placed_profile(common, pts, t)
+    assert np.allclose(got.center_mm, t)
+    deg = np.degrees(got.phi_rad)
+    deg = np.where(deg > 180, deg - 360, deg)
+    on = (deg > -58) & (deg < 78)
+    want = np.interp(deg[on], np.degrees(a), 6.0 + smooth)
+    assert np.max(np.abs(got.rho_mm[on] - want)) < 3e-4
+    off = (deg > 100) & (deg < 170)  # beyond the arc's end at 80°: held at its value there
+    assert np.max(np.abs(got.rho_mm[off] - (6.0 + smooth[-1]))) < 3e-4
+    # a view with too few points is only moved
+    few = placed_profile(common, pts[:20], t)
+    assert np.allclose(few.rho_mm, 6.0) and np.allclose(few.center_mm, t)
+
+
+def test_a_placed_profile_ignores_a_views_stray_points():
+    """2 % of the view's points 0.2 mm off (spikes) do not bend the placed profile (robust
+    fit): within 0.2 µm of the clean circle's."""
+    from lts360.twin.profile import placed_profile
+
+    rng = np.random.default_rng(3)
+    common = _circle_profile((0.1, 0.0), 10.0)
+    a = np.radians(np.linspace(100.0, 260.0, 3000))
+    r = 10.0 + np.where(rng.uniform(size=a.size) < 0.02, 0.2, 0.0)
+    pts = np.array([0.1, 0.0]) + r[:, None] * np.column_stack([np.cos(a), np.sin(a)])
+    got = placed_profile(common, pts, np.zeros(2))
+    assert np.max(np.abs(got.rho_mm - 10.0)) < 2e-4
 
 
 def test_each_views_pixels_are_the_plans_split_by_view():

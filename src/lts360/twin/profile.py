@@ -25,7 +25,7 @@ from scipy.ndimage import median_filter, uniform_filter1d
 from lts360.geometry.fit import fit_circle
 
 __all__ = ["SectionProfile", "section_profile", "NOISE_TARGET_UM", "MAX_SMOOTH_DEG", "prism_mesh", "ray_radii", "AxialForm",
-           "axial_form", "loft_mesh", "view_offsets", "view_profile"]
+           "axial_form", "loft_mesh", "view_offsets", "placed_profile"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -437,32 +437,52 @@ def view_offsets(theta_rad, radii_mm: dict, *, min_overlap: int = 10, ridge: flo
     return {n: x[2 * k:2 * k + 2].copy() for k, n in enumerate(names)}
 
 
-def view_profile(points_by_view: dict, offsets: dict, name: str, *, cover_deg: float = 1.0,
-                 **kwargs) -> SectionProfile:
-    """The section as view ``name`` measured it: its own points wherever it has them, and the
-    other views' points, moved onto it by their :func:`view_offsets` (``p − t_j + t_name``),
-    only where it has none (φ bins of ``cover_deg`` about the circle through all the moved
-    points, its own bins widened by one each side).  ``kwargs`` go to
-    :func:`section_profile`.
+#: A view's point farther than this many robust σ (and this many µm) from its first fit does
+#: not bend its placed profile (a spike); a plain least-squares fit otherwise: a view's own
+#: points near its arc's ends depart most (grazing incidence), and a robust weighting that
+#: dropped them moved the perturbed calibration's right-view correction by +0.3 µm.
+PLACED_OUTLIER_SIGMA = 6.0
+PLACED_OUTLIER_FLOOR_UM = 30.0
 
-    Each view's twin is this profile: it lies where the view saw the section (the calibration's
-    errors and the view's own bias included), without the seams of the others' points where
-    they meet its own; the others only close it.
+
+def placed_profile(profile: SectionProfile, own_points_mm, offset_mm, *, degree: int = 4,
+                   min_points: int = 50) -> SectionProfile:
+    """The section where one view measured it: ``profile`` (all views' points, aligned) moved
+    by the view's offset (:func:`view_offsets`) and bent by the view's own points' smooth
+    departure from it.
+
+    The departure is the radial distance of ``own_points_mm`` (k, 2) from the moved profile,
+    fitted by a polynomial of ``degree`` in φ over the view's own arc (least squares, spikes
+    beyond :data:`PLACED_OUTLIER_SIGMA` dropped) and held at the arc's ends beyond it.  A calibration's error
+    maps a section smoothly (a mirror plane off moves, tilts and slightly stretches its view's
+    points), which this carries; the view's point-scale ripple (a shiny surface's glints,
+    render noise) is its own bias, which a twin must not carry (on the wavy alu pipe a twin
+    made of each view's own points raised the corrected section's scatter by ~10 %).  With
+    fewer than ``min_points`` own points the profile is only moved.
     """
-    t = {n: np.asarray(offsets.get(n, np.zeros(2)), float) for n in points_by_view}
-    own = np.asarray(points_by_view[name], float).reshape(-1, 2)
-    others = [np.asarray(p, float).reshape(-1, 2) - t[n] + t[name]
-              for n, p in points_by_view.items() if n != name]
-    others = np.concatenate(others) if others else np.zeros((0, 2))
-    if len(own) >= 3 and len(others):
-        c = fit_circle(np.concatenate([own, others])).center_mm
-        n_bins = max(1, int(round(360.0 / float(cover_deg))))
-
-        def bins(p):
-            a = np.mod(np.arctan2(p[:, 1] - c[1], p[:, 0] - c[0]), 2 * np.pi)
-            return np.minimum((a / (2 * np.pi) * n_bins).astype(np.int64), n_bins - 1)
-
-        covered = np.bincount(bins(own), minlength=n_bins) > 0
-        covered = covered | np.roll(covered, 1) | np.roll(covered, -1)
-        others = others[~covered[bins(others)]]
-    return section_profile(np.concatenate([own, others]), **kwargs)
+    c = np.asarray(profile.center_mm, float) + np.asarray(offset_mm, float).reshape(2)
+    p = np.asarray(own_points_mm, float).reshape(-1, 2)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    bend = np.zeros_like(profile.rho_mm)
+    if len(p) >= max(int(min_points), int(degree) + 2):
+        d = p - c
+        phi = np.arctan2(d[:, 1], d[:, 0])
+        res = np.hypot(d[:, 0], d[:, 1]) - np.interp(np.mod(phi, 2 * np.pi), profile.phi_rad,
+                                                     profile.rho_mm, period=2 * np.pi)
+        mid = float(np.angle(np.mean(np.exp(1j * phi))))
+        x = np.angle(np.exp(1j * (phi - mid))) / np.pi  # in [-1, 1] about the arc's middle
+        X = np.vander(x, int(degree) + 1)
+        keep = np.ones(res.shape, bool)
+        for _ in range(2):  # a fit, then again without the gross outliers
+            beta = np.linalg.lstsq(X[keep], res[keep], rcond=None)[0]
+            r = res - X @ beta
+            s = 1.4826 * np.median(np.abs(r - np.median(r)))
+            keep = np.abs(r) <= max(PLACED_OUTLIER_SIGMA * s, 1e-3 * PLACED_OUTLIER_FLOOR_UM)
+            if keep.all() or keep.sum() < X.shape[1] + 1:
+                break
+        xg = np.clip(np.angle(np.exp(1j * (profile.phi_rad - mid))) / np.pi, x.min(), x.max())
+        bend = np.vander(xg, int(degree) + 1) @ beta
+    return SectionProfile(center_mm=c, phi_rad=profile.phi_rad, rho_mm=profile.rho_mm + bend,
+                          coverage=profile.coverage, largest_gap_deg=profile.largest_gap_deg,
+                          noise_um=profile.noise_um, smooth_deg=profile.smooth_deg,
+                          n_outliers=profile.n_outliers)
