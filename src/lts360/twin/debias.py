@@ -273,6 +273,14 @@ class TwinCorrector:
     spp, seed : int
         The twin's render (noise-free; ``spp`` ≥ 64 for µm work); section ``k`` of a scan
         renders with ``seed + k``.
+    sampler : str
+        The twin render's sampler: ``keyed`` (default:
+        :class:`~lts360.simulator.keyed_sampler.KeyedSampler`, a pixel's samples a function of
+        the pixel and the seed alone: the twins of one image with two calibrations, whose
+        plans read slightly different pixels, share their render noise where they overlap;
+        with Mitsuba's ``multijitter`` they drew it independently and at 64 spp their mean
+        corrections differed by up to 7 µm (direct view, half-scale Ø12 gauge, mirror planes
+        50 µm off), keyed ≤ 0.4 µm) or one of Mitsuba's (:data:`lts360.simulator.render.SAMPLERS`).
     smooth_deg : float
         Smoothing of the bias along θ (and its reach across twin gaps).
     half_length_mm : float
@@ -300,6 +308,7 @@ class TwinCorrector:
     material: str = "ground-steel"
     spp: int = DEFAULT_TWIN_SPP
     seed: int = TWIN_SEED
+    sampler: str = "keyed"
     smooth_deg: float = DEFAULT_SMOOTH_DEG
     half_length_mm: float = 30.0
     input_u: dict | None = field(default_factory=lambda: dict(INPUT_U))
@@ -313,6 +322,11 @@ class TwinCorrector:
         if isinstance(self.spp, bool) or not isinstance(self.spp, (int, np.integer)) \
                 or self.spp < 1:
             raise ValueError(f"twin spp must be an integer >= 1, got {self.spp!r}")
+        from lts360.simulator.render import SAMPLERS
+
+        if self.sampler not in SAMPLERS:
+            raise ValueError(f"twin sampler must be one of {', '.join(SAMPLERS)}, got "
+                             f"{self.sampler!r}")
         if not 0 < self.smooth_deg <= 30:
             raise ValueError(f"twin smooth_deg must be in (0, 30], got {self.smooth_deg}")
         if not 0 <= self.axial_reach_mm <= MAX_AXIAL_REACH_MM:
@@ -352,7 +366,8 @@ class TwinCorrector:
         spec = SceneSpec(rig, (("object", mesh,
                                      material_to_bsdf(get_material(self.material))),),
                          laser_mirrors=laser_side_mirrors(rig))
-        kw = dict(spp=int(self.spp), scale=1.0, max_bounces=2, thin_lens=True, laser_on=True)
+        kw = dict(spp=int(self.spp), scale=1.0, max_bounces=2, thin_lens=True, laser_on=True,
+                  sampler=self.sampler)
         if self._scenes is None:
             self._scenes = SceneCache(max_scenes=2)
         rad, las, _ = render_pixels(spec, pixels_xy, seed=int(seed),
@@ -684,13 +699,18 @@ class TwinCorrector:
 
 
 def twin_corrected(result, cal: Calibration, grid, twin: TwinCorrector, *,
-                   compensate: bool = False, peak: str = "centroid"):
+                   compensate: bool = False, peak: str = "centroid", plan=None):
     """``result`` — one image measured by :func:`~lts360.recon.triangulation.inverse.
     inverse_triangulate` with ``cal`` on ``grid`` (``compensate`` as it was measured) — with its
-    line-centre bias removed by ``twin``: the twin image is measured by that same function."""
+    line-centre bias removed by ``twin``: the twin image is measured by that same function
+    (with ``plan``, the plan ``result`` was measured with, if the caller holds it: for ``cal``
+    and ``grid``, not made again)."""
     from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
 
-    plan = plan_inverse(cal, grid)
+    if plan is None:
+        plan = plan_inverse(cal, grid)
+    elif plan.cal is not cal or plan.grid is not grid:
+        raise ValueError("twin_corrected: the plan is not for this calibration and grid")
 
     def measure(img):
         return inverse_triangulate(img, cal, grid, peak=peak, plan=plan, compensate=compensate)
@@ -699,12 +719,13 @@ def twin_corrected(result, cal: Calibration, grid, twin: TwinCorrector, *,
 
 
 def twin_corrected_raw(result, cal: Calibration, grid, twin: TwinCorrector, *,
-                       peak: str = "centroid"):
+                       peak: str = "centroid", plan=None):
     """A round reference's uncompensated measurement ``result`` (on ``grid``) with its
     line-centre bias removed by ``twin``, returned as raw radii (``r_raw_mm``), for the
     mastering fit (:func:`lts360.recon.calibration.compensation.master_fit`): the masters then
-    set what the twin leaves, not the bias the twin removes from every later measurement."""
-    fixed = twin_corrected(result, cal, grid, twin, peak=peak)
+    set what the twin leaves, not the bias the twin removes from every later measurement.
+    ``plan``: as :func:`twin_corrected`."""
+    fixed = twin_corrected(result, cal, grid, twin, peak=peak, plan=plan)
     views = {n: dataclasses.replace(v, r_raw_mm=np.where(np.isfinite(v.r_mm), v.r_mm,
                                                          v.r_raw_mm))
              for n, v in fixed.views.items()}
