@@ -505,24 +505,21 @@ def test_the_twin_of_a_perturbed_calibration_corrects_as_the_true_one(small_gaug
     out of perpendicular to the sheet (turned about an axis in it) and ±50 µm off: each view's
     mean twin correction agrees with the true calibration's within the issue's 1 µm.
 
-    Measured (half scale, Ø12 gauge 2 mm off the axis, twins at 1024 spp): −8.99/−16.14/−7.74 µm
-    (direct, left, right) with the true calibration; +0.49, +0.13, +0.43 µm apart with the
-    perturbed one; the tilt alone +0.42, +0.17, +0.76 µm.  What made them differ before: the
-    twin was one profile of all views' points, and the mirror views 0.1 mm off made it a
-    patchwork whose seams lie at each view's ends, where its correction is largest (+0.3,
-    +1.0, −2.2 µm apart at 1024 spp, −6.2 µm for the right view at 64 spp); each view's twin
-    is now its own points, the others moved onto it (``view_profile``).
-    Why 1024 spp: at the product's 64 spp one twin's render noise moves a view's mean
-    correction here by ~1 µm (sd over twin seeds), and the two twins draw it independently
-    (the sampler is seeded per wavefront, and the two plans' pixel lists differ), so one pair
-    scatters by sd 0.4–1.7 µm: six seeds gave means −0.6, +0.2, +0.9 µm, single pairs up to
-    3.6 µm (+1.25, +0.14, +0.62 µm at the default seed).  At 1024 spp over four twin seeds:
-    perturbed +0.60, +0.01, +0.73 µm (single seeds ≤ 1.04 µm), the tilt alone +0.92, +0.37,
-    +0.71 µm with single seeds up to 1.35 µm (direct): the bound holds at this seed, and for
-    the mean over seeds, with a thin margin; what the tilt leaves is not the laser side (lit
-    through the true mirrors it reads the same) and is not identified.  Lit through the
-    calibrated mirrors as they are instead, the tilt moves the mirror views' corrections by
-    +66 and −57 µm."""
+    Measured 2026-12-05 (half scale, Ø12 gauge 2 mm off the axis, twins at 1024 spp, keyed
+    sampler), over the default seed and six others: perturbed − true direct −0.21…+0.19,
+    left −0.26…+0.24, right +0.19…+0.79 µm; the tilt alone direct +0.04…+0.32, left
+    −0.24…+0.19, right +0.48…+0.73 µm (default seed: +0.01/+0.17/+0.55 and +0.17/+0.06/+0.73).
+    The right view's +0.5…+0.6 µm is what the twin leaves of a tilted mirror (not identified).
+    What made them differ before: (1) the twin was one profile of all views' points, and the
+    mirror views 0.1 mm off made it a patchwork whose seams lie at each view's ends, where
+    the correction is largest (now each view's twin is the seam-free profile placed where the
+    view measured it: ``placed_profile``); (2) the two twins drew independent render noise
+    (Mitsuba's sampler is seeded per wavefront lane and the two plans' pixel lists differ):
+    at 64 spp single pairs differed by up to 7 µm (now the keyed sampler: a pixel's samples
+    are its own).  At 64 spp, keyed, seven seeds: up to 1.3 µm (right) and 2.0 µm (direct,
+    the tilt alone, one seed) — the twin's own render noise where the two surfaces differ —
+    hence 1024 spp here.  Lit through the calibrated mirrors as they are instead, the tilt
+    moves the mirror views' corrections by tens of µm (second part)."""
     from lts360.recon.model import load_calibration
 
     cal = load_calibration(small_gauge_frame / "frame.json")
