@@ -122,9 +122,10 @@ def _corner_errors_um(cloud, ring):
 @pytest.mark.slow
 def test_the_twin_with_corners_unrounds_a_rendered_hexagon(hex_frame):
     """Full size (at half scale the faces themselves read ~28 µm rms, too rough to fit), 16
-    spp, one render.  Measured 2026-12-04, radial error within 2° of a corner: rms 70.3 µm as
-    measured, 41.1 µm with the twin of the measured profile, 11.9 µm with its corners
-    restored (all six sharpened); more than 4° from a corner 7.6, 9.3 and 9.3 µm."""
+    spp, one render.  Measured 2026-12-04 with each view's own twin, radial error within 2° of
+    a corner: rms 70.3 µm as measured, 41.0 µm with the twin of the measured profile, 11.3 µm
+    with its corners restored (all six sharpened); more than 4° from a corner 7.6, 10.1 and
+    10.0 µm (one twin of all views' points: 41.6, 10.6; 9.2 and 9.2 µm)."""
     from lts360.recon.model import load_calibration
     from lts360.recon.triangulation.measure import Section, measure_sections_following
     from lts360.scenes.rig_io import load_rig

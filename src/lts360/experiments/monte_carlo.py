@@ -248,7 +248,8 @@ def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
             from lts360.twin import twin_corrected_raw
 
             grid = _grid(theta_step_deg, placement_mm)
-            results = [twin_corrected_raw(r, cal, grid, _twin(cal)) for r in results]
+            twin, plan = _twin(cal, memo), _plan(cal, grid, memo)
+            results = [twin_corrected_raw(r, cal, grid, twin, plan=plan) for r in results]
         fit = master_fit(results, GAUGE_DIAMETER_MM)
         return dataclasses.replace(cal, view_offsets_mm=fit.offsets_mm,
                                    view_radial_offsets_mm=fit.radial_offset_mm,
@@ -321,13 +322,21 @@ def _plan(cal, grid, memo: dict | None):
     return base if base.cal is cal else dataclasses.replace(base, cal=cal)
 
 
-def _twin(cal):
+def _twin(cal, memo: dict | None = None):
     """The twin of a measurement with ``cal`` (its optics: the rig ``cal`` records, refused in
-    one line without a record), as the plug-gauge study makes it: no input sensitivity."""
+    one line without a record), as the plug-gauge study makes it: no input sensitivity.  With
+    ``memo`` one twin for the calibrations of a trial (its master's shots and its image: the
+    same drawn geometry), so that its scene is loaded once and moved to each surface; each
+    correction is its own section of the twin's log, rendered with its own seed."""
     from lts360.twin import TwinCorrector
     from lts360.twin.rig import twin_design
 
-    return TwinCorrector(cal, twin_design(cal), input_u=None)
+    twin = memo.get("twin") if memo is not None else None
+    if twin is None:
+        twin = TwinCorrector(cal, twin_design(cal), input_u=None)
+        if memo is not None:
+            memo["twin"] = twin
+    return twin
 
 
 @functools.lru_cache(maxsize=8)
@@ -451,8 +460,8 @@ def _measure(image, cal, grid, bias_model: str, memo: dict | None = None):
         return plain, plain, np.nan
     from lts360.twin import twin_corrected
 
-    twin = _twin(cal)
-    fixed = twin_corrected(plain, cal, grid, twin, compensate=comp)
+    twin = _twin(cal, memo)
+    fixed = twin_corrected(plain, cal, grid, twin, compensate=comp, plan=_plan(cal, grid, memo))
     views = twin.log.sections[-1]["views"].values()
     b = np.concatenate([v["bias_mm"] for v in views]) if views else np.zeros(0)
     return fixed, plain, float(1e3 * b.mean()) if b.size else np.nan

@@ -107,6 +107,12 @@ class RenderResult:
 MAX_SPP = 4096
 
 
+#: The samplers a render takes: Mitsuba's, and ``keyed`` (:func:`render_pixels` with the
+#: laser integrator only): :class:`~lts360.simulator.keyed_sampler.KeyedSampler`, a pixel's
+#: samples a function of the seed and the pixel alone, whatever the other pixels rendered.
+SAMPLERS = ("multijitter", "independent", "stratified", "ldsampler", "keyed")
+
+
 def _check_args(spp, seed, scale, integrator, sampler) -> None:
     if not (isinstance(spp, int) and 1 <= spp <= MAX_SPP):
         raise ValueError(f"spp must be an integer in [1, {MAX_SPP}], got {spp!r}")
@@ -116,8 +122,8 @@ def _check_args(spp, seed, scale, integrator, sampler) -> None:
         raise ValueError(f"scale must be in (0, 1], got {scale}")
     if integrator not in ("laser", "path"):
         raise ValueError(f"integrator must be 'laser' or 'path', got {integrator!r}")
-    if sampler not in ("multijitter", "independent", "stratified", "ldsampler"):
-        raise ValueError(f"sampler must be multijitter, independent, stratified or ldsampler, got {sampler!r}")
+    if sampler not in SAMPLERS:
+        raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)}, got {sampler!r}")
 
 
 def _setup(spec, *, spp, scale, max_bounces, thin_lens, laser_on, integrator, sampler,
@@ -130,7 +136,9 @@ def _setup(spec, *, spp, scale, max_bounces, thin_lens, laser_on, integrator, sa
 
     register()
     sensor = camera_to_mitsuba(spec.rig.camera, spp=spp, thin_lens=thin_lens, scale=scale)
-    sensor["sampler"] = {"type": sampler, "sample_count": spp}
+    # a keyed render draws its own samples; the sensor's sampler then only sets the count
+    sensor["sampler"] = {"type": "independent" if sampler == "keyed" else sampler,
+                         "sample_count": spp}
     scene = load_scene(spec, sensor)
     if integrator == "laser":
         lp, mps = laser_params(spec.rig, laser_on=laser_on, mirrors=spec.laser_mirrors)
@@ -217,9 +225,18 @@ def render_pixels(spec: SceneSpec, pixels_xy, *, spp: int = 4, seed: int = 0, sc
     t0 = time.perf_counter()
     smp = sensor.sampler()
     spp = int(smp.sample_count())  # as the sampler rounded it (multijitter: 32 -> 35)
-    smp.set_samples_per_wavefront(spp)
-    smp.seed(dr.opaque(mi.UInt32, seed), n * spp)
-    lane_px = dr.arange(mi.UInt32, n * spp) // spp
+    lane = dr.arange(mi.UInt32, n * spp)
+    lane_px = lane // spp
+    if sampler == "keyed":
+        if integrator != "laser":
+            raise ValueError("sampler 'keyed' needs the laser integrator")
+        from lts360.simulator.keyed_sampler import KeyedSampler
+
+        key = mi.UInt32((px[:, 1] * width + px[:, 0]).astype(np.uint32))
+        smp = KeyedSampler(dr.gather(mi.UInt32, key, lane_px), lane - lane_px * spp, spp, seed)
+    else:
+        smp.set_samples_per_wavefront(spp)
+        smp.seed(dr.opaque(mi.UInt32, seed), n * spp)
     pos = mi.Vector2f(dr.gather(mi.Float, mi.Float(px[:, 0].astype(np.float32)), lane_px),
                       dr.gather(mi.Float, mi.Float(px[:, 1].astype(np.float32)), lane_px))
     pos = pos + smp.next_2d()

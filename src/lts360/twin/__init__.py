@@ -8,8 +8,15 @@ geometry; recon never imports it (it offers a ``correct`` hook instead).
 """
 
 from lts360.twin.debias import TwinCorrector, TwinLog, twin_corrected, twin_corrected_raw
-from lts360.twin.profile import SectionProfile, prism_mesh, ray_radii, section_profile
+from lts360.twin.profile import (
+    SectionProfile,
+    placed_profile,
+    prism_mesh,
+    ray_radii,
+    section_profile,
+    view_offsets,
+)
 from lts360.twin.rig import CalibratedCamera, twin_rig
 
 __all__ = ["TwinCorrector", "TwinLog", "twin_corrected", "twin_corrected_raw", "SectionProfile", "prism_mesh", "ray_radii",
-           "section_profile", "CalibratedCamera", "twin_rig"]
+           "section_profile", "view_offsets", "placed_profile", "CalibratedCamera", "twin_rig"]

@@ -1,15 +1,24 @@
 """Model-based line-centre bias correction: measure the twin of the section with the same
 plan, and subtract what the chain does to a profile whose radii are known exactly.
 
-For each section: the measured points give a closed profile (:mod:`lts360.twin.profile`); its
-prism is rendered noise-free through the calibrated rig with the rig file's optics
-(:mod:`lts360.twin.rig`: the camera sees it through the calibrated mirrors, the laser lights
-it through them turned perpendicular to the calibrated sheet), only on the pixels the plan reads; the twin image is measured by the
-very function (same grid, windows, detector, compensation, rejection) that measured the real
-image.  Per view and θ the bias is ``b = r_twin_measured − r_twin_exact`` (the exact radius of
-the prism along the same ray), smoothed along θ over ``smooth_deg`` (the twin's render noise),
-and the real radii become ``r − b``.  A valid point farther than ``smooth_deg / 2`` from any
-twin estimate of its view keeps its radius and is counted as uncorrected.
+For each section: the measured points of all views, each view moved by its offset from the
+others where they measured the same rays (:func:`~lts360.twin.profile.view_offsets`: a
+calibration's error, a view's own bias), give one seam-free profile; each view's twin is that
+profile placed where the view measured the section (:func:`~lts360.twin.profile.
+placed_profile`: moved by the view's offset and bent by its own points' smooth departure, not
+by their point-scale ripple).  One profile of all views' points as they are would be a
+patchwork whose seams lie at each view's ends, where its correction is largest: with mirror
+planes 50 µm off it moved the corrections by ~2 µm.  Each view's prism is rendered noise-free
+through the calibrated rig with the rig file's optics (:mod:`lts360.twin.rig`: the camera sees it through
+the calibrated mirrors, the laser lights it through them turned perpendicular to the
+calibrated sheet) on that view's pixels of the plan only (:func:`view_pixels`, one loaded
+scene, its vertices moved from view to view), the parts put together into one twin image,
+which is measured by the very function (same grid, windows, detector, compensation,
+rejection) that measured the real image.  Per view and θ the bias is
+``b = r_twin_measured − r_twin_exact`` (the exact radius of the view's prism along the same
+ray), smoothed along θ over ``smooth_deg`` (the twin's render noise), and the real radii
+become ``r − b``.  A valid point farther than ``smooth_deg / 2`` from any twin estimate of its
+view keeps its radius and is counted as uncorrected.
 
 What the correction cannot know is what the twin does not model: the real surface's micro-
 structure and material beyond the chosen BSDF, and the geometry between the sections (the prism
@@ -25,6 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -33,7 +43,14 @@ from lts360.recon.model import Calibration
 from lts360.scenes.materials import get_material
 from lts360.scenes.rig import Rig
 from lts360.twin.corners import sharpen_corners
-from lts360.twin.profile import axial_form, loft_mesh, ray_radii, section_profile
+from lts360.twin.profile import (
+    axial_form,
+    loft_mesh,
+    placed_profile,
+    ray_radii,
+    section_profile,
+    view_offsets,
+)
 from lts360.twin.rig import laser_side_mirrors, twin_rig
 
 __all__ = ["TwinCorrector", "TwinLog", "twin_corrected", "twin_corrected_raw", "DEFAULT_TWIN_SPP", "DEFAULT_SMOOTH_DEG", "INPUT_U",
@@ -141,6 +158,80 @@ def _compensated(verts_mm: np.ndarray, cal, name: str, compensate: bool) -> np.n
     return out + kw.get("offset_mm", np.zeros(2))
 
 
+def _uncompensated(verts_mm: np.ndarray, cal, name: str, compensate: bool) -> np.ndarray:
+    """The inverse of :func:`_compensated`: where the profile ``verts_mm`` (n, 2), as view
+    ``name``'s compensated measurement reads it, lies in that view's own (uncompensated)
+    measurement: the translation taken off, then the radii ``(ρ − radial offset) / scale``."""
+    from lts360.recon.triangulation.inverse import compensation_of
+
+    kw = compensation_of(cal, name, compensate)
+    if not kw:
+        return verts_mm
+    v = verts_mm - kw.get("offset_mm", np.zeros(2))
+    rho = np.hypot(*v.T)
+    return v * (((rho - kw["radial_offset_mm"]) / kw["scale"]) / rho)[:, None]
+
+
+def _placed(mesh, cal, name: str, compensate: bool):
+    """``mesh`` (view ``name``'s twin, as its compensated measurement reads it) out of the
+    view's compensation: the twin is rendered through the calibrated planes as they are.  The
+    same faces (a loaded scene is reused with its vertices moved); ``mesh`` itself when the
+    view is not compensated."""
+    import trimesh
+
+    if not compensate:
+        return mesh
+    v = np.array(mesh.vertices, dtype=float)
+    v[:, :2] = _uncompensated(v[:, :2], cal, name, compensate)
+    return trimesh.Trimesh(vertices=v, faces=mesh.faces, process=False)
+
+
+#: Per plan, each view's pixels (the plan's own, split by view; dies with the plan).
+_VIEW_PIXELS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def view_pixels(plan, *, margin_px: int = 4) -> dict:
+    """Each view's pixels of ``plan``: what the view's twin render needs, the pixels of
+    :func:`~lts360.recon.triangulation.inverse.plan_pixels` (the same rule: the 4 × 4
+    neighbourhood of each grid point's projection widened by ``margin_px``) split by the view
+    that reads them (a pixel two views read goes to the first).  Each view's box is built on
+    its own bounding box, not the whole image."""
+    from scipy.ndimage import maximum_filter1d
+
+    out = _VIEW_PIXELS.get(plan)
+    if out is not None:
+        return out
+    w, h = plan.cal.image_size
+    r = 2 + int(margin_px)
+    seen = np.zeros((h, w), bool)
+    out = {}
+    for name, vp in plan.views.items():  # as plan_pixels, on the view's bounding box
+        uv = vp.uv.reshape(-1, 2)
+        u, v = uv[:, 0], uv[:, 1]
+        # floor(u) in [-2, w + 1) is u in [-2, w + 1) (NaN fails it); floor then clip to the
+        # image is clip then truncate
+        with np.errstate(invalid="ignore"):
+            ok = (u >= -2) & (u < w + 1) & (v >= -2) & (v < h + 1)
+        mx = np.clip(u[ok], 0, w - 1).astype(np.int64)
+        my = np.clip(v[ok], 0, h - 1).astype(np.int64)
+        if not mx.size:
+            out[name] = np.zeros((0, 2), np.int64)
+            continue
+        x0, y0 = max(int(mx.min()) - r, 0), max(int(my.min()) - r, 0)
+        x1, y1 = min(int(mx.max()) + r + 1, w), min(int(my.max()) + r + 1, h)
+        m = np.zeros((y1 - y0, x1 - x0), np.uint8)
+        m[my - y0, mx - x0] = 1
+        for axis in (0, 1):
+            m = maximum_filter1d(m, 2 * r + 1, axis=axis, mode="constant", cval=0)
+        ys, xs = np.nonzero(m)
+        ys, xs = ys + y0, xs + x0
+        new = ~seen[ys, xs]
+        seen[ys[new], xs[new]] = True
+        out[name] = np.column_stack([xs[new], ys[new]])
+    _VIEW_PIXELS[plan] = out
+    return out
+
+
 def _nan_smooth(values: np.ndarray, size: int, wrap: bool) -> tuple[np.ndarray, np.ndarray]:
     """Moving mean of the finite values over ``size`` samples; (mean, count) per sample."""
     from scipy.ndimage import uniform_filter1d
@@ -182,6 +273,14 @@ class TwinCorrector:
     spp, seed : int
         The twin's render (noise-free; ``spp`` ≥ 64 for µm work); section ``k`` of a scan
         renders with ``seed + k``.
+    sampler : str
+        The twin render's sampler: ``keyed`` (default:
+        :class:`~lts360.simulator.keyed_sampler.KeyedSampler`, a pixel's samples a function of
+        the pixel and the seed alone: the twins of one image with two calibrations, whose
+        plans read slightly different pixels, share their render noise where they overlap;
+        with Mitsuba's ``multijitter`` they drew it independently and at 64 spp their mean
+        corrections differed by up to 7 µm (direct view, half-scale Ø12 gauge, mirror planes
+        50 µm off), keyed ≤ 0.4 µm) or one of Mitsuba's (:data:`lts360.simulator.render.SAMPLERS`).
     smooth_deg : float
         Smoothing of the bias along θ (and its reach across twin gaps).
     half_length_mm : float
@@ -209,6 +308,7 @@ class TwinCorrector:
     material: str = "ground-steel"
     spp: int = DEFAULT_TWIN_SPP
     seed: int = TWIN_SEED
+    sampler: str = "keyed"
     smooth_deg: float = DEFAULT_SMOOTH_DEG
     half_length_mm: float = 30.0
     input_u: dict | None = field(default_factory=lambda: dict(INPUT_U))
@@ -222,6 +322,11 @@ class TwinCorrector:
         if isinstance(self.spp, bool) or not isinstance(self.spp, (int, np.integer)) \
                 or self.spp < 1:
             raise ValueError(f"twin spp must be an integer >= 1, got {self.spp!r}")
+        from lts360.simulator.render import SAMPLERS
+
+        if self.sampler not in SAMPLERS:
+            raise ValueError(f"twin sampler must be one of {', '.join(SAMPLERS)}, got "
+                             f"{self.sampler!r}")
         if not 0 < self.smooth_deg <= 30:
             raise ValueError(f"twin smooth_deg must be in (0, 30], got {self.smooth_deg}")
         if not 0 <= self.axial_reach_mm <= MAX_AXIAL_REACH_MM:
@@ -230,6 +335,7 @@ class TwinCorrector:
         if not 1 <= int(self.axial_passes) <= 5:
             raise ValueError(f"twin axial_passes must be in [1, 5], got {self.axial_passes}")
         self._observed: list = []  # (z_mm, profile in the base frame or None, origin)
+        self._scenes = None  # the twin's loaded scenes (SceneCache), made at the first render
         self._rigs = {id(self.cal): (self.cal, twin_rig(self.cal, self.design))}
 
     @property
@@ -245,25 +351,58 @@ class TwinCorrector:
         return self._rigs[id(cal)][1]
 
     # -- the twin image ----------------------------------------------------------------------
-    def render(self, surface, pixels_xy: np.ndarray, *, seed: int, exposure_fraction: float,
-               rig: Rig | None = None) -> np.ndarray:
-        """The twin's noise-free digital image of ``surface`` (a closed mesh, or a profile
-        extruded straight; only ``pixels_xy`` rendered; ``rig`` defaults to :attr:`rig`)."""
-        from lts360.simulator.frame import sensor_image
+    def _radiance(self, surface, pixels_xy: np.ndarray, *, seed: int, rig: Rig):
+        """The twin's radiance and laser share (W m⁻² sr⁻¹) of ``surface`` (a closed mesh, or
+        a profile extruded straight) on ``pixels_xy`` only; the scene is loaded once and
+        reused while only the surface's vertices move."""
         from lts360.simulator.materials import material_to_bsdf
-        from lts360.simulator.render import ensure_variant, render_radiance_pixels
+        from lts360.simulator.render import ensure_variant, render_pixels
+        from lts360.simulator.reuse import SceneCache
         from lts360.simulator.scene import SceneSpec
 
         ensure_variant()
-        rig = self.rig if rig is None else rig
         mesh = (surface if hasattr(surface, "faces")
                 else loft_mesh(surface, half_length_mm=self.half_length_mm))
         spec = SceneSpec(rig, (("object", mesh,
                                      material_to_bsdf(get_material(self.material))),),
                          laser_mirrors=laser_side_mirrors(rig))
-        res = render_radiance_pixels(spec, pixels_xy, spp=int(self.spp), seed=int(seed),
-                                     scale=1.0, max_bounces=2, thin_lens=True, laser_on=True)
-        image, _, _ = sensor_image(rig, res, noise="none",
+        kw = dict(spp=int(self.spp), scale=1.0, max_bounces=2, thin_lens=True, laser_on=True,
+                  sampler=self.sampler)
+        if self._scenes is None:
+            self._scenes = SceneCache(max_scenes=2)
+        rad, las, _ = render_pixels(spec, pixels_xy, seed=int(seed),
+                                    prepared=self._scenes.prepare(spec, **kw), **kw)
+        return rad, las
+
+    def render(self, surface, pixels_xy: np.ndarray, *, seed: int, exposure_fraction: float,
+               rig: Rig | None = None) -> np.ndarray:
+        """The twin's noise-free digital image of ``surface`` (a closed mesh, or a profile
+        extruded straight; only ``pixels_xy`` rendered; ``rig`` defaults to :attr:`rig`)."""
+        return self.render_views({"all": (surface, pixels_xy)}, seed=seed,
+                                 exposure_fraction=exposure_fraction, rig=rig)
+
+    def render_views(self, parts: dict, *, seed: int, exposure_fraction: float,
+                     rig: Rig | None = None) -> np.ndarray:
+        """One twin image made of parts: ``parts`` maps a view to ``(surface, pixels_xy)``,
+        each surface rendered on its view's pixels only (the same seed), then the image
+        exposed once as a whole (``exposure_fraction``: its brightest laser pixels, the 99.9th
+        percentile, as a fraction of full scale)."""
+        from lts360.simulator.frame import sensor_image
+        from lts360.simulator.render import RenderResult, require_variant
+
+        rig = self.rig if rig is None else rig
+        cam = rig.camera
+        radiance = np.zeros((cam.height_px, cam.width_px), np.float32)
+        laser = np.zeros_like(radiance)
+        for surface, px in parts.values():
+            px = np.asarray(px, np.int64).reshape(-1, 2)
+            rad, las = self._radiance(surface, px, seed=seed, rig=rig)
+            radiance[px[:, 1], px[:, 0]] = rad
+            laser[px[:, 1], px[:, 0]] = las
+        total = RenderResult(radiance_W_m2_sr=radiance, laser_W_m2_sr=laser, K=cam.K,
+                             variant=require_variant(), spp=int(self.spp), seed=int(seed),
+                             seconds=0.0)
+        image, _, _ = sensor_image(rig, total, noise="none",
                                    exposure_fraction=exposure_fraction)
         return image
 
@@ -280,15 +419,36 @@ class TwinCorrector:
 
     # -- the hook ----------------------------------------------------------------------------
     @staticmethod
-    def _profile(result, *, fine: bool = False):
-        """The section's profile from every view's valid points: smoothed as their noise asks
-        (:func:`section_profile`), or ``fine``: over 1° whatever their noise, every point kept
-        (the corners' faces are fitted on it: a noisy profile's wide smoothing rounds them)."""
-        pts = [v.points_meas_mm[v.valid, :2] for v in result.views.values()]
+    def _offsets(result) -> dict:
+        """Each view's offset from the others where they measured the same rays
+        (:func:`~lts360.twin.profile.view_offsets`, mm): a calibration's error (a mirror plane
+        50 µm off moves its view's points ~0.1 mm) and each view's own bias."""
+        return view_offsets(np.asarray(result.grid.theta_rad),
+                            {n: np.where(v.valid, v.r_mm, np.nan)
+                             for n, v in result.views.items()})
+
+    @staticmethod
+    def _profile(result, offsets: dict | None = None, *, fine: bool = False):
+        """The section's profile from every view's valid points, each view moved by minus
+        its ``offsets`` (the views aligned: no seam where one view's points give way to
+        another's): smoothed as their noise asks (:func:`section_profile`), or ``fine``: over
+        1° whatever their noise, every point kept (the corners' faces are fitted on it: a
+        noisy profile's wide smoothing rounds them)."""
+        offsets = offsets or {}
+        pts = [v.points_meas_mm[v.valid, :2] - offsets.get(n, np.zeros(2))
+               for n, v in result.views.items()]
         pts = np.concatenate(pts) if pts else np.zeros((0, 2))
         if fine:
             return section_profile(pts, smooth_deg=1.0, noise_target_um=None)
         return section_profile(pts, smooth_deg=1.0)
+
+    @staticmethod
+    def _view_profiles(result, profile, offsets: dict) -> dict:
+        """Each view's profile: the views' common ``profile`` placed where the view measured
+        the section (:func:`~lts360.twin.profile.placed_profile`: moved by its offset, bent by
+        its own points' smooth departure)."""
+        return {n: placed_profile(profile, v.points_meas_mm[v.valid, :2], offsets[n])
+                for n, v in result.views.items() if v.valid.any()}
 
     def observe(self, result, *, z_mm: float, origin_mm=(0.0, 0.0)) -> None:
         """Record a section of the scan before any is corrected: its stage ``z_mm`` and its
@@ -297,6 +457,11 @@ class TwinCorrector:
         if self.axial_reach_mm <= 0:
             return
         try:
+            # as measured, not aligned by the views' offsets: the offsets are each section's
+            # own (a shiny surface's views disagree by ~20 µm, differently from section to
+            # section), and aligning by them gave neighbours 0.5 mm apart false slopes and
+            # curvatures (the alu pipe's crest +40 µm); a calibration's error is the same
+            # in every section of a scan and cancels in the form as measured
             prof = self._profile(result)
         except ValueError:
             prof = None
@@ -317,11 +482,23 @@ class TwinCorrector:
         self._observed = []
         self.log.sections = []
 
-    def _surface(self, k: int, profile):
+    def _surface(self, k: int, profile, views: dict | None = None):
         """Section ``k``'s twin: the profile lofted along the axis by its observed neighbours
-        within :attr:`axial_reach_mm`, or straight; and the log's record of the form."""
+        within :attr:`axial_reach_mm`, or straight; and the log's record of the form.  With
+        ``views`` (name -> that view's profile) a dict of surfaces instead, each view's profile
+        lofted by the form read from ``profile``."""
+        if views is not None:
+            form, rec = self._form(k, profile)
+            return {n: loft_mesh(p, form, half_length_mm=self.half_length_mm)
+                    for n, p in views.items()}, rec
+        form, rec = self._form(k, profile)
+        return loft_mesh(profile, form, half_length_mm=self.half_length_mm), rec
+
+    def _form(self, k: int, profile):
+        """Section ``k``'s axial form from its observed neighbours (``None``: straight) and
+        the log's record of it."""
         if self.axial_reach_mm <= 0 or k >= len(self._observed):
-            return loft_mesh(profile, half_length_mm=self.half_length_mm), None
+            return None, None
         z, own, origin = self._observed[k]
         nb = [(zj - z, dataclasses.replace(pj, center_mm=pj.center_mm - origin))
               for j, (zj, pj, _) in enumerate(self._observed)
@@ -330,40 +507,48 @@ class TwinCorrector:
         ref = profile if own is None else dataclasses.replace(own, center_mm=own.center_mm - origin)
         form = axial_form(ref, _stencil(nb)) if nb else None
         if form is None:
-            return loft_mesh(profile, half_length_mm=self.half_length_mm), None
-        rec = {"neighbours_dz_mm": list(form.dz_mm),
-               "curvature_median_per_mm": float(np.median(form.curvature_per_mm)),
-               "slope_median": float(np.median(form.slope))}
-        return loft_mesh(profile, form, half_length_mm=self.half_length_mm), rec
+            return None, None
+        return form, {"neighbours_dz_mm": list(form.dz_mm),
+                      "curvature_median_per_mm": float(np.median(form.curvature_per_mm)),
+                      "slope_median": float(np.median(form.slope))}
 
-    def _bias(self, result, measure, plan, profile, k: int):
-        """Render and measure the twin of ``profile`` (section ``k``): its surface, the log's
-        record of its axial form, the twin's measurement and per view its unsmoothed bias
-        ``b(θ)`` (the twin's radius − the profile's exact radius along the same ray)."""
-        from lts360.recon.triangulation.inverse import plan_pixels
+    def _parts(self, result, plan, surfaces: dict) -> dict:
+        """Per view: its twin's surface (``surfaces``, as its compensated measurement reads
+        it) out of its compensation (:func:`_placed`), and the view's pixels
+        (:meth:`render_views`' parts): each view's twin image lies where the real one does,
+        whatever the calibration's errors."""
+        pixels = view_pixels(plan)
+        comp = bool(getattr(result, "compensated", False))
+        return {name: (_placed(surfaces[name], plan.cal, name, comp), px)
+                for name, px in pixels.items() if len(px) and name in surfaces}
 
-        surface, axial = self._surface(k, profile)
+    def _bias(self, result, measure, plan, profile, views: dict, k: int):
+        """Render and measure section ``k``'s twin, each view's twin its own profile
+        (``views``: name -> :func:`~lts360.twin.profile.placed_profile`; ``profile`` the views'
+        common one, whose neighbours give the axial form): the log's record of the form, the
+        twin's measurement, per view its unsmoothed bias ``b(θ)`` (the twin's radius − the
+        exact radius of the view's profile along the same ray) and the parts rendered."""
+        surfaces, axial = self._surface(k, profile, views)
+        parts = self._parts(result, plan, surfaces)
         t0 = time.perf_counter()
-        image = self.render(surface, plan_pixels(plan), seed=self.seed + k,
-                            exposure_fraction=self._exposure_fraction(result),
-                            rig=self.rig_for(plan.cal))
+        image = self.render_views(parts, seed=self.seed + k,
+                                  exposure_fraction=self._exposure_fraction(result),
+                                  rig=self.rig_for(plan.cal))
         t1 = time.perf_counter()
         twin = measure(image)
         self.log.render_s += t1 - t0
         self.log.measure_s += time.perf_counter() - t1
-        verts = profile.vertices_mm
         bias = {}
         for name, tv in twin.views.items():
-            # A compensated measurement moved the twin's view by its §4.4 offset (and its
-            # mastering) too: the twin is rendered through the very planes it is measured
-            # with, so what corrects those planes' errors in the real image is no bias of its.
+            # The twin of each view lies where that view measured the section, moved out of
+            # its compensation (§4.4, mastering) and measured with it: its exact radius is its
+            # profile's, as the compensated measurement reads it.
             exact = np.full(np.shape(tv.r_mm), np.nan)
-            exact[tv.valid] = ray_radii(_compensated(verts, plan.cal, name,
-                                                     getattr(twin, "compensated", False)),
+            exact[tv.valid] = ray_radii(views.get(name, profile).vertices_mm,
                                         np.asarray(tv.theta_rad)[tv.valid],
                                         near_mm=np.asarray(tv.r_mm)[tv.valid])
             bias[name] = np.where(tv.valid, tv.r_mm - exact, np.nan)
-        return surface, axial, twin, bias
+        return axial, twin, bias, parts
 
     @staticmethod
     def _corner_phi(result, profile) -> dict:
@@ -412,7 +597,9 @@ class TwinCorrector:
         self.log.sections.append(entry)
         k = len(self.log.sections) - 1
         try:
-            profile = self._profile(result)
+            offsets = self._offsets(result)
+            profile = self._profile(result, offsets)
+            views = self._view_profiles(result, profile, offsets)
         except ValueError as exc:
             entry["skipped"] = str(exc)
             return result
@@ -421,22 +608,29 @@ class TwinCorrector:
                             "largest_gap_deg": profile.largest_gap_deg,
                             # the points' noise, the smoothing it asked for, the outliers dropped
                             "noise_um": profile.noise_um, "smooth_deg": profile.smooth_deg,
-                            "n_outliers": profile.n_outliers}
-        surface, axial, twin, bias = self._bias(result, measure, plan, profile, k)
+                            "n_outliers": profile.n_outliers,
+                            # each view's offset from the others (µm): its twin is moved so
+                            "view_offsets_um": {n: (1e3 * t).tolist() for n, t in offsets.items()}}
+        axial, twin, bias, parts = self._bias(result, measure, plan, profile, views, k)
         entry["axial"] = axial
         zones, s_bias = {}, {}
         if self.corners:
-            fine = self._profile(result, fine=True) if profile.smooth_deg > 1.0 else profile
+            fine = (self._profile(result, offsets, fine=True) if profile.smooth_deg > 1.0
+                    else profile)
             sharp, found = sharpen_corners(fine)
             if found:
-                s_surface, _, s_twin, s_bias = self._bias(result, measure, plan, sharp, k)
+                # each view's sharp twin: the common one's, moved by the view's offset (a
+                # view's own points near a corner it sees at grazing incidence round it more)
+                s_views = {n: dataclasses.replace(sharp, center_mm=sharp.center_mm + offsets[n])
+                           for n in views}
+                _, s_twin, s_bias, s_parts = self._bias(result, measure, plan, sharp, s_views, k)
                 zones = self._choose_corners(result, profile, found, twin, s_twin, entry)
                 if any(z.any() for z in zones.values()):
-                    profile, surface, twin = sharp, s_surface, s_twin
+                    profile, views, twin, parts = sharp, s_views, s_twin, s_parts
             else:
                 entry["corners"] = []
         if self.input_u and not self.log.inputs:
-            self._input_sensitivity(result, measure, plan, profile, twin, surface)
+            self._input_sensitivity(result, measure, plan, views, twin, parts)
         grid = result.grid
         step = grid.theta_step_rad
         size = max(1, int(round(np.radians(self.smooth_deg) / step)))
@@ -469,34 +663,32 @@ class TwinCorrector:
                 "theta_rad": np.asarray(v.theta_rad)[ok], "bias_mm": b_s[ok]}
         return dataclasses.replace(result, views=views)
 
-    def _view_bias_um(self, twin, verts) -> dict[str, float]:
-        """Each view's mean bias (µm) in a twin measurement of the prism ``verts``."""
+    def _view_bias_um(self, twin, views: dict) -> dict[str, float]:
+        """Each view's mean bias (µm) in a twin measurement of its profile (``views``)."""
         out = {}
         for name, tv in twin.views.items():
-            exact = ray_radii(verts, tv.theta_rad, near_mm=tv.r_mm)
+            if name not in views:
+                continue
+            exact = ray_radii(views[name].vertices_mm, tv.theta_rad, near_mm=tv.r_mm)
             b = (tv.r_mm - exact)[tv.valid]
             b = b[np.isfinite(b)]
             if b.size:
                 out[name] = float(1e3 * np.mean(b))
         return out
 
-    def _input_sensitivity(self, result, measure, plan, profile, twin, surface) -> None:
-        """Render the twin again with each input moved by its u (same seed) and record how
-        each view's mean bias moves (:attr:`TwinLog.inputs`)."""
-        from lts360.recon.triangulation.inverse import plan_pixels
-
-        verts = profile.vertices_mm
-        base = self._view_bias_um(twin, verts)
-        pixels = plan_pixels(plan)
+    def _input_sensitivity(self, result, measure, plan, views, twin, parts) -> None:
+        """Render the twin (its ``parts``, :meth:`render_views`) again with each input moved by
+        its u (same seed) and record how each view's mean bias moves (:attr:`TwinLog.inputs`)."""
+        base = self._view_bias_um(twin, views)
         seed = self.seed + len(self.log.sections) - 1
         deltas: dict[str, dict[str, float]] = {name: {} for name in base}
         t0 = time.perf_counter()
         for key, u in self.input_u.items():
             design = perturbed_design(self.design, key, u)
             rig = twin_rig(plan.cal, design)
-            img = self.render(surface, pixels, seed=seed,
-                              exposure_fraction=self._exposure_fraction(result), rig=rig)
-            moved = self._view_bias_um(measure(img), verts)
+            img = self.render_views(parts, seed=seed,
+                                    exposure_fraction=self._exposure_fraction(result), rig=rig)
+            moved = self._view_bias_um(measure(img), views)
             for name in base:
                 if name in moved:
                     deltas[name][key] = moved[name] - base[name]
@@ -507,13 +699,18 @@ class TwinCorrector:
 
 
 def twin_corrected(result, cal: Calibration, grid, twin: TwinCorrector, *,
-                   compensate: bool = False, peak: str = "centroid"):
+                   compensate: bool = False, peak: str = "centroid", plan=None):
     """``result`` — one image measured by :func:`~lts360.recon.triangulation.inverse.
     inverse_triangulate` with ``cal`` on ``grid`` (``compensate`` as it was measured) — with its
-    line-centre bias removed by ``twin``: the twin image is measured by that same function."""
+    line-centre bias removed by ``twin``: the twin image is measured by that same function
+    (with ``plan``, the plan ``result`` was measured with, if the caller holds it: for ``cal``
+    and ``grid``, not made again)."""
     from lts360.recon.triangulation.inverse import inverse_triangulate, plan_inverse
 
-    plan = plan_inverse(cal, grid)
+    if plan is None:
+        plan = plan_inverse(cal, grid)
+    elif plan.cal is not cal or plan.grid is not grid:
+        raise ValueError("twin_corrected: the plan is not for this calibration and grid")
 
     def measure(img):
         return inverse_triangulate(img, cal, grid, peak=peak, plan=plan, compensate=compensate)
@@ -522,12 +719,13 @@ def twin_corrected(result, cal: Calibration, grid, twin: TwinCorrector, *,
 
 
 def twin_corrected_raw(result, cal: Calibration, grid, twin: TwinCorrector, *,
-                       peak: str = "centroid"):
+                       peak: str = "centroid", plan=None):
     """A round reference's uncompensated measurement ``result`` (on ``grid``) with its
     line-centre bias removed by ``twin``, returned as raw radii (``r_raw_mm``), for the
     mastering fit (:func:`lts360.recon.calibration.compensation.master_fit`): the masters then
-    set what the twin leaves, not the bias the twin removes from every later measurement."""
-    fixed = twin_corrected(result, cal, grid, twin, peak=peak)
+    set what the twin leaves, not the bias the twin removes from every later measurement.
+    ``plan``: as :func:`twin_corrected`."""
+    fixed = twin_corrected(result, cal, grid, twin, peak=peak, plan=plan)
     views = {n: dataclasses.replace(v, r_raw_mm=np.where(np.isfinite(v.r_mm), v.r_mm,
                                                          v.r_raw_mm))
              for n, v in fixed.views.items()}

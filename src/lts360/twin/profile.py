@@ -25,7 +25,7 @@ from scipy.ndimage import median_filter, uniform_filter1d
 from lts360.geometry.fit import fit_circle
 
 __all__ = ["SectionProfile", "section_profile", "NOISE_TARGET_UM", "MAX_SMOOTH_DEG", "prism_mesh", "ray_radii", "AxialForm",
-           "axial_form", "loft_mesh"]
+           "axial_form", "loft_mesh", "view_offsets", "placed_profile"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -347,3 +347,142 @@ def ray_radii(vertices_mm, theta_rad, near_mm=None, *, chunk: int = 512) -> np.n
             out[a:a + chunk] = t[np.arange(len(k)), k]
     out[~np.isfinite(out)] = np.nan
     return out
+
+
+#: Rays a shared curve's slope is taken over (median), and the steepest incidence of a ray on
+#: it (the views measure up to ~70° of incidence) in :func:`view_offsets`.
+SLOPE_RAYS = 11
+MAX_INCIDENCE_DEG = 75.0
+
+
+def _ray_jacobian(theta: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """(n, 2): how the radius along each ray from the origin moves when the curve ``r(θ)`` is
+    translated by ``t`` (first order): ``∂r/∂t = u − (r′/r) w``, ``u`` the ray's direction and
+    ``w`` its normal (``n ∝ r u − r′ w`` is the curve's normal; ``Δr = (n·t)/(n·u)``)."""
+    u = np.column_stack([np.cos(theta), np.sin(theta)])
+    w = np.column_stack([-np.sin(theta), np.cos(theta)])
+    if r.size < 2:
+        return u
+    # the slope of the curve, not of a spike: a median over SLOPE_RAYS rays first, and the
+    # ray's incidence on the curve kept below MAX_INCIDENCE_DEG
+    r_m = median_filter(r, size=min(SLOPE_RAYS, r.size) | 1, mode="nearest")
+    k = np.clip(np.gradient(r_m, theta) / r_m, -np.tan(np.radians(MAX_INCIDENCE_DEG)),
+                np.tan(np.radians(MAX_INCIDENCE_DEG)))
+    return u - k[:, None] * w
+
+
+def view_offsets(theta_rad, radii_mm: dict, *, min_overlap: int = 10, ridge: float = 1e-3,
+                 iters: int = 5) -> dict:
+    """Per view the translation (mm, in the rays' plane) that best aligns the views where
+    they measured the same rays.
+
+    Parameters
+    ----------
+    theta_rad : (n,) float
+        The rays (from the origin), increasing.
+    radii_mm : dict name -> (n,) float
+        Each view's radius along the rays, NaN where it has none.
+    min_overlap : int
+        A pair of views sharing fewer rays than this does not count.
+    ridge : float
+        Weight (per ray, relative) pulling each translation towards 0: it fixes what the
+        overlaps leave free (their common translation, and a component along a short overlap).
+    iters : int
+        Reweighting passes (Tukey's biweight at 4.685 robust σ).
+
+    For views ``a``, ``b`` and every shared ray, ``r_b − r_a = J·(t_b − t_a)`` with ``J`` the
+    ray's Jacobian (:func:`_ray_jacobian`, from the pair's mean curve), solved jointly by
+    robust least squares with the ridge: the minimum-norm solution has ``Σ t = 0``.  A view
+    without a shared ray keeps ``t = 0``.  Exact for data that follow the linear model; a
+    translated circle about the origin is recovered to ``O(|t|² / R)``.
+    """
+    th = np.asarray(theta_rad, float).ravel()
+    names = list(radii_mm)
+    m = 2 * len(names)
+    blocks, rhs = [], []
+    for i, a in enumerate(names):
+        ra = np.asarray(radii_mm[a], float).ravel()
+        for b in names[i + 1:]:
+            rb = np.asarray(radii_mm[b], float).ravel()
+            both = np.isfinite(ra) & np.isfinite(rb)
+            if both.sum() < max(int(min_overlap), 3):
+                continue
+            mean = np.where(both, 0.5 * (ra + rb), np.nan)
+            J = np.full((th.size, 2), np.nan)
+            idx = np.flatnonzero(both)
+            # the slope along each run of shared rays (a gap's two sides are not neighbours)
+            for run in np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1):
+                J[run] = _ray_jacobian(th[run], mean[run])
+            A = np.zeros((idx.size, m))
+            A[:, 2 * names.index(b):2 * names.index(b) + 2] = J[idx]
+            A[:, 2 * i:2 * i + 2] = -J[idx]
+            blocks.append(A)
+            rhs.append(rb[idx] - ra[idx])
+    if not blocks:
+        return {n: np.zeros(2) for n in names}
+    A, y = np.vstack(blocks), np.concatenate(rhs)
+    lam = np.sqrt(float(ridge) * len(y) / m)
+    w = np.ones_like(y)
+    x = np.zeros(m)
+    for _ in range(int(iters)):
+        sw = np.sqrt(w)
+        x = np.linalg.lstsq(np.vstack([A * sw[:, None], lam * np.eye(m)]),
+                            np.concatenate([y * sw, np.zeros(m)]), rcond=None)[0]
+        res = y - A @ x
+        s = 1.4826 * np.median(np.abs(res - np.median(res)))
+        if not s > 0:
+            break
+        q = res / (4.685 * s)
+        w = np.where(np.abs(q) < 1, (1 - q * q) ** 2, 0.0)
+    return {n: x[2 * k:2 * k + 2].copy() for k, n in enumerate(names)}
+
+
+#: A view's point farther than this many robust σ (and this many µm) from its first fit does
+#: not bend its placed profile (a spike); a plain least-squares fit otherwise: a view's own
+#: points near its arc's ends depart most (grazing incidence), and a robust weighting that
+#: dropped them moved the perturbed calibration's right-view correction by +0.3 µm.
+PLACED_OUTLIER_SIGMA = 6.0
+PLACED_OUTLIER_FLOOR_UM = 30.0
+
+
+def placed_profile(profile: SectionProfile, own_points_mm, offset_mm, *, degree: int = 4,
+                   min_points: int = 50) -> SectionProfile:
+    """The section where one view measured it: ``profile`` (all views' points, aligned) moved
+    by the view's offset (:func:`view_offsets`) and bent by the view's own points' smooth
+    departure from it.
+
+    The departure is the radial distance of ``own_points_mm`` (k, 2) from the moved profile,
+    fitted by a polynomial of ``degree`` in φ over the view's own arc (least squares, spikes
+    beyond :data:`PLACED_OUTLIER_SIGMA` dropped) and held at the arc's ends beyond it.  A calibration's error
+    maps a section smoothly (a mirror plane off moves, tilts and slightly stretches its view's
+    points), which this carries; the view's point-scale ripple (a shiny surface's glints,
+    render noise) is its own bias, which a twin must not carry (on the wavy alu pipe a twin
+    made of each view's own points raised the corrected section's scatter by ~10 %).  With
+    fewer than ``min_points`` own points the profile is only moved.
+    """
+    c = np.asarray(profile.center_mm, float) + np.asarray(offset_mm, float).reshape(2)
+    p = np.asarray(own_points_mm, float).reshape(-1, 2)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    bend = np.zeros_like(profile.rho_mm)
+    if len(p) >= max(int(min_points), int(degree) + 2):
+        d = p - c
+        phi = np.arctan2(d[:, 1], d[:, 0])
+        res = np.hypot(d[:, 0], d[:, 1]) - np.interp(np.mod(phi, 2 * np.pi), profile.phi_rad,
+                                                     profile.rho_mm, period=2 * np.pi)
+        mid = float(np.angle(np.mean(np.exp(1j * phi))))
+        x = np.angle(np.exp(1j * (phi - mid))) / np.pi  # in [-1, 1] about the arc's middle
+        X = np.vander(x, int(degree) + 1)
+        keep = np.ones(res.shape, bool)
+        for _ in range(2):  # a fit, then again without the gross outliers
+            beta = np.linalg.lstsq(X[keep], res[keep], rcond=None)[0]
+            r = res - X @ beta
+            s = 1.4826 * np.median(np.abs(r - np.median(r)))
+            keep = np.abs(r) <= max(PLACED_OUTLIER_SIGMA * s, 1e-3 * PLACED_OUTLIER_FLOOR_UM)
+            if keep.all() or keep.sum() < X.shape[1] + 1:
+                break
+        xg = np.clip(np.angle(np.exp(1j * (profile.phi_rad - mid))) / np.pi, x.min(), x.max())
+        bend = np.vander(xg, int(degree) + 1) @ beta
+    return SectionProfile(center_mm=c, phi_rad=profile.phi_rad, rho_mm=profile.rho_mm + bend,
+                          coverage=profile.coverage, largest_gap_deg=profile.largest_gap_deg,
+                          noise_um=profile.noise_um, smooth_deg=profile.smooth_deg,
+                          n_outliers=profile.n_outliers)
