@@ -34,6 +34,21 @@ def test_the_monte_carlo_refuses_an_unknown_bias_model(tmp_path):
     assert not (tmp_path / "renders").exists()  # refused before anything was rendered
 
 
+def test_each_full_trial_draws_its_own_twin_render_noise():
+    """The twin's samples are keyed to the pixel and the seed: a trial whose every input
+    varies renders its twin with a seed of its own (different between trials, the same for
+    the same trial), a one-at-a-time run with the twin's default."""
+    from lts360.experiments.monte_carlo import INPUTS, _twin_seed
+
+    all_inputs = set(INPUTS)
+    a = [_twin_seed(all_inputs, np.random.default_rng(t).integers(0, 2**31, size=5))
+         for t in range(50)]
+    assert len(set(a)) == 50 and all(0 <= x < 2**32 for x in a)
+    seeds = np.random.default_rng(3).integers(0, 2**31, size=5)
+    assert _twin_seed(all_inputs, seeds) == _twin_seed(all_inputs, seeds.copy())
+    assert all(_twin_seed({name}, seeds) is None for name in INPUTS)
+
+
 def test_the_monte_carlo_twin_needs_the_calibrations_optics(tmp_path, truth_calibration):
     import dataclasses
 

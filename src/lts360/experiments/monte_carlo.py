@@ -74,8 +74,13 @@ shot) and, with ``steps``, measures two more configurations: 100 such trials too
 worker processes (STUDIES.md, "Monte Carlo uncertainty").  The configurations of one draw
 share its drawn calibration, its reference shots (imaged and measured once, not once per
 configuration) and one inverse plan (they differ only by compensation, applied to the
-measured points afterwards): a default trial then costs 1.06–1.10 s of CPU against
-1.79–1.80 s before (BENCHMARKS.md), two thirds of it the twin's two corrections.
+measured points afterwards), and one twin (one loaded scene, moved to each surface): a
+default trial costs 0.95–1.00 s of CPU (BENCHMARKS.md), half of it the twin's two corrections.
+The twin's samples are keyed to the pixel and the seed
+(:class:`~lts360.simulator.keyed_sampler.KeyedSampler`): with one seed for every trial each
+twin would draw nearly the same render noise, so a trial whose every input varies renders its
+twin with a seed of its own (the twin's default seed in the one-at-a-time runs, whose inputs
+do not include it).
 
 With ``steps`` (default on) each trial of the full Monte Carlo also measures its image with
 the other configurations of :data:`MC_STEPS` on the same draw (the same image, drawn
@@ -333,7 +338,8 @@ def _twin(cal, memo: dict | None = None):
 
     twin = memo.get("twin") if memo is not None else None
     if twin is None:
-        twin = TwinCorrector(cal, twin_design(cal), input_u=None)
+        kw = {"seed": memo["twin_seed"]} if memo is not None and "twin_seed" in memo else {}
+        twin = TwinCorrector(cal, twin_design(cal), input_u=None, **kw)
         if memo is not None:
             memo["twin"] = twin
     return twin
@@ -467,6 +473,15 @@ def _measure(image, cal, grid, bias_model: str, memo: dict | None = None):
     return fixed, plain, float(1e3 * b.mean()) if b.size else np.nan
 
 
+def _twin_seed(vary: set, seeds) -> int | None:
+    """The twin's render seed of a trial whose every input varies (its render noise drawn
+    too: a stream of its own from the trial's seeds); ``None`` (the twin's default seed) in a
+    one-at-a-time run."""
+    if vary != set(INPUTS):
+        return None
+    return int(np.random.SeedSequence([int(seeds[0]), 7717]).generate_state(1)[0])
+
+
 def mc_trial(trial: Trial) -> TrialOutput:
     """One Monte Carlo draw (see the module docstring); ``params['vary']`` names the inputs
     that vary (``all`` or one of :data:`INPUTS`).  ``params``: ``compensate``, ``master``,
@@ -498,6 +513,8 @@ def mc_trial(trial: Trial) -> TrialOutput:
         raise ValueError(f"bias_model must be none or twin, got {bias_model!r}")
     grid = _grid(step, pl_mm)
     memo: dict = {}  # the draw's calibration and reference shots, shared by its steps
+    if (twin_seed := _twin_seed(vary, seeds)) is not None:
+        memo["twin_seed"] = twin_seed
     cal = _trial_calibration(p, vary, seeds, compensate=compensate, master=master,
                              bias_model=bias_model, memo=memo)
     out, plain, twin_bias = _measure(image, cal, grid, bias_model, memo)
