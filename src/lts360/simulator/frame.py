@@ -217,17 +217,20 @@ def render_frame(spec: SceneSpec, *, spp: int, seed: int, scale: float = 1.0, ma
                            margin_px=sup.margin_px)
     radiance = np.zeros((h, w), np.float32)
     laser = np.zeros((h, w), np.float32)
-    if spec.ambient != "off" and sup.method not in ("full", "window"):
+    ambient = spec.ambient != "off" and sup.method not in ("full", "window")
+    if ambient:
         amb = render_radiance(spec, spp=AMBIENT_SPP, seed=seed, scale=scale,
                               max_bounces=max_bounces, thin_lens=thin_lens, laser_on=False)
         radiance[:] = amb.radiance_W_m2_sr if window is None else amb.radiance_W_m2_sr * window
-    px = sup.pixels_xy
-    rad, las, _ = render_pixels(spec, px, seed=seed, prepared=prepared, **kw)
-    radiance[px[:, 1], px[:, 0]] = rad
-    laser[px[:, 1], px[:, 0]] = las
+    index = np.flatnonzero(sup.mask)                # row-major: sorted
+    rad, las, _ = render_pixels(spec, np.column_stack([index % w, index // w]), seed=seed,
+                                prepared=prepared, **kw)
+    radiance.flat[index] = rad
+    laser.flat[index] = las
     res = RenderResult(radiance_W_m2_sr=radiance, laser_W_m2_sr=laser,
                        K=scale_intrinsics(spec.rig.camera.K, scale), variant=require_variant(),
-                       spp=spp, seed=seed, seconds=time.perf_counter() - t0)
+                       spp=spp, seed=seed, seconds=time.perf_counter() - t0,
+                       held_index=None if ambient or sup.method == "full" else index)
     return res, sup
 
 
@@ -275,20 +278,28 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
     if speckle_seed is not None:
         seeds[0] = np.random.SeedSequence([int(speckle_seed), 0x5BEC])
     laser = res.laser_W_m2_sr
-    lit = laser > 0
-    on = np.flatnonzero(laser != 0)
+    flat = np.asarray(res.radiance_W_m2_sr).reshape(-1)
     # The light is carried as the pixels that hold any (a pixel support frame: ~1 % of them):
     # a dark pixel's electrons are 0 whatever the radiometry's factors, so only the lit ones
     # are converted (the same products, pixel by pixel, as over the whole frame).
     # A frame lit nearly everywhere (a board under ambient light) is converted whole: the
     # index of every pixel costs more than it saves (expose and expose_held agree bit for bit).
-    flat = np.asarray(res.radiance_W_m2_sr).reshape(-1)
-    held = np.flatnonzero(flat)
+    rendered = getattr(res, "held_index", None)
+    if rendered is not None:  # only the rendered pixels can hold light: no scan of the frame
+        las_r = laser.reshape(-1)[rendered]
+        on = rendered[las_r != 0]
+        held = rendered[(flat[rendered] != 0) | (las_r != 0)]
+        lit = np.zeros(laser.shape, bool)
+        lit.flat[rendered[las_r > 0]] = True
+    else:
+        lit = laser > 0
+        on = np.flatnonzero(laser != 0)
+        held = np.flatnonzero(flat)
     if 2 * held.size > flat.size:
         held = None
         radiance = flat.astype(np.float64)
     else:
-        held = np.union1d(held, on)
+        held = np.union1d(held, on) if rendered is None else held
         radiance = flat[held].astype(np.float64)
     if speckle is None:
         speckle = noise == "realistic"
@@ -305,8 +316,10 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
     if exposure_time_s is None:
         # The statistic over the laser-lit pixels only (the same values as a mask over the
         # whole frame, without converting the dark rest).
+        lit_values = res.radiance_W_m2_sr[lit] if rendered is None else \
+            flat[rendered[laser.reshape(-1)[rendered] > 0]]    # the same values, in order
         exposure_time_s = sensor_mod.auto_exposure(
-            res.radiance_W_m2_sr[lit] if lit.any() else res.radiance_W_m2_sr, sens,
+            lit_values if lit_values.size else res.radiance_W_m2_sr, sens,
             wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
             pixel_pitch_um=pitch_um, target_fraction=exposure_fraction, percentile=99.9,
             magnification=magnification)
