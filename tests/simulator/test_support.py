@@ -172,6 +172,26 @@ def test_ambient_fills_the_pixels_outside_the_support(variant, rig):
     assert a.mean() == pytest.approx(b.mean(), rel=0.01)
 
 
+def test_splat_covers_each_disk_and_no_more_than_its_rounding():
+    """Each point marks every pixel centre within its radius of the exact point (whatever its
+    sub-pixel position), and none farther than radius + √2/2 from the pixel it rounds to (the
+    disk of integer offsets, not a rasterised ellipse a pixel wider)."""
+    from lts360.simulator.support import _splat
+
+    rng = np.random.default_rng(5)
+    uv = rng.uniform(10, 50, size=(40, 2))
+    r = rng.uniform(0.0, 6.0, size=40)
+    mask = _splat(uv, r, (64, 64))
+    yy, xx = np.mgrid[:64, :64]
+    inner = np.zeros_like(mask)
+    outer = np.zeros_like(mask)
+    for (u, v), ri in zip(uv, r):
+        inner |= (xx - u) ** 2 + (yy - v) ** 2 <= ri ** 2
+        outer |= (xx - np.rint(u)) ** 2 + (yy - np.rint(v)) ** 2 <= (ri + np.sqrt(0.5)) ** 2 + 1e-9
+    assert np.all(mask[inner]) and not np.any(mask & ~outer)
+    assert np.array_equal(mask, outer)
+
+
 def test_support_is_refused_bad_input(variant, rig):
     from lts360.simulator.frame import simulate_frame
 

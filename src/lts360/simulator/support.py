@@ -358,15 +358,18 @@ def geometric_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_le
     # edge is blurred over that much (plus 1 mm).
     edge_mm = cam.aperture_diameter_mm + 1.0 if thin_lens else 1.0
     no_normal = np.isnan(normals[:, 0])
+    # n · (c − p) and |c − p|² for every view's camera c from n · p and |p|², computed once.
+    n_dot_p = np.einsum("ij,ij->i", normals, pts)
+    p_dot_p = np.einsum("ij,ij->i", pts, pts)
     for seq, (A, b) in zip(_sequences(rig, max_bounces), maps):
         # One-sided surfaces (no BSDF here is two-sided): a point seen from behind its face
         # holds no light for this view.  The pupil's rays reach up to ~1° around the chief
         # ray: keep faces down to BACKFACE_COS edge-on.  Tested where the points are, against
         # the camera centre unfolded by the view's mirrors (A is orthogonal: the angle and the
         # distance are those of the mirror image and the camera).
-        to_cam = A.T @ (C - b) - pts
-        facing = np.einsum("ij,ij->i", normals, to_cam) \
-            > -BACKFACE_COS * np.sqrt(np.einsum("ij,ij->i", to_cam, to_cam))
+        c = A.T @ (C - b)
+        dist2 = np.maximum(float(c @ c) - 2.0 * (pts @ c) + p_dot_p, 0.0)
+        facing = normals @ c - n_dot_p > -BACKFACE_COS * np.sqrt(dist2)
         # The mirror checks and the projection on the points that face the view only (half of
         # them: a convex object turns half its section away).
         Xv = pts[facing | no_normal] @ A.T + b
@@ -421,23 +424,25 @@ def _depth_range(P_world: np.ndarray, cam) -> tuple[float, float]:
 
 
 def _splat(uv: np.ndarray, radius_px: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """Mask of every pixel centre within ``radius_px`` of a point ``uv`` (points rounded to
-    their pixel and grouped by their radius + √2/2 rounded up, each group dilated by a disk of
-    that radius)."""
+    """Mask of every pixel centre within ``radius_px`` of a point ``uv``: the points are rounded
+    to their pixel, which moves them by ≤ √2/2 px, so each is dilated by the disk of radius
+    ``radius_px + √2/2`` — the integer offsets ``(dx, dy)`` with ``dx² + dy² ≤ R²`` exactly
+    (points grouped by ``⌊R²⌋``, which fixes the offsets, each group dilated once)."""
     import cv2
 
     h, w = shape
-    # Rounding a point's image to its pixel moves it by ≤ √2/2 px: the disk is that much wider.
-    R = np.ceil(radius_px + np.sqrt(0.5)).astype(np.int64)
-    pad = int(R.max()) + 1
+    R = radius_px + np.sqrt(0.5)
+    key = np.floor(R * R + 1e-9).astype(np.int64)        # offsets have integer d²
+    pad = math.isqrt(int(key.max())) + 1
     iu = np.rint(uv[:, 0]).astype(np.int64) + pad
     iv = np.rint(uv[:, 1]).astype(np.int64) + pad
     inside = (iu >= 0) & (iu < w + 2 * pad) & (iv >= 0) & (iv < h + 2 * pad)
     out = np.zeros((h + 2 * pad, w + 2 * pad), np.uint8)
-    for r in np.unique(R[inside]):
-        sel = inside & (R == r)
-        rr = int(r)
-        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * rr + 1, 2 * rr + 1))
+    for k in np.unique(key[inside]).tolist():
+        sel = inside & (key == k)
+        rr = math.isqrt(k)
+        d = np.arange(-rr, rr + 1)
+        kernel = ((d[:, None] ** 2 + d[None, :] ** 2) <= k).astype(np.uint8)
         x0, x1 = max(0, iu[sel].min() - rr), min(out.shape[1], iu[sel].max() + rr + 1)
         y0, y1 = max(0, iv[sel].min() - rr), min(out.shape[0], iv[sel].max() + rr + 1)
         canvas = np.zeros((y1 - y0, x1 - x0), np.uint8)
