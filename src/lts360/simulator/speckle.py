@@ -87,6 +87,10 @@ SPECKLE_TILE_PX = 32
 #: Radius, in ``λ N_w``, at which :func:`speckle_on_tiles` truncates the amplitude PSF (it
 #: keeps 98.7 % of its energy; the pixel contrast is +1.9–2.1 % above the theory's, see there).
 KEYED_PSF_RADIUS = 16.0
+#: Pixel rows of a tile computed together by :func:`speckle_on_tiles`'s last inverse DFT: only
+#: the groups that hold a lit pixel are computed (each group alone: the same arithmetic
+#: whichever other groups are).
+_ROW_GROUP = 8
 #: Fine samples per strip of the final inverse DFT along x (bounds the working memory).
 _STRIP_SAMPLES = 2 ** 20
 
@@ -291,7 +295,8 @@ def speckle_on_tiles(lit, *, pixel_pitch_um: float, wavelength_nm: float, f_numb
     Returns
     -------
     (H, W) float32
-        1 on the pixels of unlit tiles (no laser light: nothing to modulate).
+        1 on the pixels of unlit tiles (no laser light: nothing to modulate), and on the
+        rows of a lit tile whose group of :data:`_ROW_GROUP` rows holds no lit pixel.
     """
     lit = np.asarray(lit, bool)
     if lit.ndim != 2:
@@ -317,11 +322,17 @@ def speckle_on_tiles(lit, *, pixel_pitch_um: float, wavelength_nm: float, f_numb
         workers = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
         edges = np.linspace(0, tiles.size, min(tiles.size, 4 * workers) + 1).round().astype(int)
 
+        starts = np.arange(0, T, _ROW_GROUP)
+        groups = padded.reshape(nty, T, ntx, T).any(axis=3)             # (nty, T, ntx)
+        groups = np.add.reduceat(groups, starts, axis=1) > 0            # (nty, groups, ntx)
+
         def block(i: int) -> None:
             for t in tiles[edges[i]:edges[i + 1]].tolist():
                 ty, tx = divmod(t, ntx)
+                rows = [(int(a), min(T, int(a) + _ROW_GROUP))
+                        for a in starts[groups[ty, :, tx]]]
                 J = sum(_keyed_tile(k, ty * T * s - radius, tx * T * s - radius, n, T, s,
-                                    spectrum) for k in keys) / len(keys)
+                                    spectrum, rows) for k in keys) / len(keys)
                 if contrast_scale != 1.0:
                     J = 1.0 + float(contrast_scale) * (J - 1.0)
                 view[ty, tx] = J
@@ -388,22 +399,27 @@ def keyed_contrast(pixel_pitch_um: float, wavelength_nm: float, f_number: float,
 
 
 def _keyed_tile(key: int, y0: int, x0: int, n: int, T: int, s: int,
-                spectrum: np.ndarray) -> np.ndarray:
+                spectrum: np.ndarray, rows=None) -> np.ndarray:
     """The pixel-integrated intensity of one tile, (T, T) float32: the fine field on the
     ``n × n`` noise block whose corner is the fine sample ``(y0, x0)``, the tile being its
-    centre ``T s × T s`` (the rest is the PSF's reach)."""
+    centre ``T s × T s`` (the rest is the PSF's reach).  ``rows``: the ranges ``(a, b)`` of
+    pixel rows computed (default all); the others are 1."""
     import scipy.fft
 
     noise = _keyed_noise(key, y0, x0, n)
     N = spectrum.shape[0]
     P = scipy.fft.fft2(noise, (N, N), workers=1, overwrite_x=True)
     P *= spectrum
-    # The inverse DFT along y, then along x for the tile's own rows only (its centre).
+    # The inverse DFT along y, then along x for the tile's own rows only (its centre), range
+    # by range (each alone: its values do not depend on which other rows are computed).
     r = (n - T * s) // 2
-    u = scipy.fft.ifft(P, axis=0, workers=1, overwrite_x=True)[r:r + T * s]
-    u = scipy.fft.ifft(u, axis=1, workers=1, overwrite_x=True)[:, r:r + T * s]
-    v = u.real * u.real + u.imag * u.imag
-    return v.reshape(T, s, T, s).mean(axis=(1, 3), dtype=np.float64).astype(np.float32)
+    Y = scipy.fft.ifft(P, axis=0, workers=1, overwrite_x=True)[r:r + T * s]
+    J = np.ones((T, T), np.float32)
+    for a, b in ([(0, T)] if rows is None else rows):
+        u = scipy.fft.ifft(Y[a * s:b * s], axis=1, workers=1)[:, r:r + T * s]
+        v = u.real * u.real + u.imag * u.imag
+        J[a:b] = v.reshape(b - a, s, T, s).mean(axis=(1, 3), dtype=np.float64)
+    return J
 
 
 def _keyed_noise(key: int, y0: int, x0: int, n: int) -> np.ndarray:
