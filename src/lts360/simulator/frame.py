@@ -179,7 +179,7 @@ def render_frame(spec: SceneSpec, *, spp: int, seed: int, scale: float = 1.0, ma
 
     from lts360.geometry.camera import scale_intrinsics
     from lts360.simulator import support as support_mod
-    from lts360.simulator.render import render_pixels, require_variant
+    from lts360.simulator.render import prepare_scene, render_pixels, require_variant
 
     if support not in SUPPORT_METHODS:
         raise ValueError(f"support must be one of {', '.join(SUPPORT_METHODS)}, got {support!r}")
@@ -193,8 +193,10 @@ def render_frame(spec: SceneSpec, *, spp: int, seed: int, scale: float = 1.0, ma
     w, h = support_mod.film_size(spec.rig.camera, scale)
     if support == "full" and pixels_xy is None and scenes is None:
         return render_radiance(spec, seed=seed, **kw), support_mod.full_support(spec.rig.camera, scale)
-    prepared = scenes.prepare(spec, **kw) if scenes is not None else None
     geo = dict(scale=scale, max_bounces=max_bounces, thin_lens=thin_lens)
+
+    def load():
+        return scenes.prepare(spec, **kw) if scenes is not None else prepare_scene(spec, **kw)
 
     def make():
         if support == "geometric":
@@ -204,7 +206,17 @@ def render_frame(spec: SceneSpec, *, spp: int, seed: int, scale: float = 1.0, ma
                                              max_scatter=max_scatter, **geo)
         return support_mod.full_support(spec.rig.camera, scale)
 
-    sup = make() if scenes is None else scenes.support(spec, make, method=support, **geo)
+    if support == "geometric":
+        # The scene is loaded (or its shapes moved) on a second thread while the geometry gives
+        # the support here: both are mostly one core's work (the same scene as loaded here).
+        pending = _scene_thread().submit(_evaluated, load)
+        try:
+            sup = make() if scenes is None else scenes.support(spec, make, method=support, **geo)
+        finally:
+            prepared = pending.result()
+    else:  # the pilot renders the prepared scene
+        prepared = load()
+        sup = make() if scenes is None else scenes.support(spec, make, method=support, **geo)
     window = None
     if pixels_xy is not None:
         px = np.asarray(pixels_xy, dtype=np.int64).reshape(-1, 2)
@@ -232,6 +244,29 @@ def render_frame(spec: SceneSpec, *, spp: int, seed: int, scale: float = 1.0, ma
                        spp=spp, seed=seed, seconds=time.perf_counter() - t0,
                        held_index=None if ambient or sup.method == "full" else index)
     return res, sup
+
+
+_SCENE_THREAD: list = []
+
+
+def _scene_thread():
+    """One worker thread of this process that loads scenes while the caller works."""
+    if not _SCENE_THREAD:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _SCENE_THREAD.append(ThreadPoolExecutor(max_workers=1, thread_name_prefix="lts360-scene"))
+    return _SCENE_THREAD[0]
+
+
+def _evaluated(fn):
+    """``fn()``, with everything Dr.Jit scheduled on this thread evaluated before it returns
+    (the result is used on another thread)."""
+    import drjit as dr
+
+    out = fn()
+    dr.eval()
+    dr.sync_thread()
+    return out
 
 
 def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int = 0,
