@@ -275,13 +275,28 @@ def slab_points(tris: np.ndarray, *, step_mm: float, return_normals: bool = Fals
         # side step/4 (a dropped point lies within step/4·√3 < 0.44 step of a kept one) and
         # per facing (normals in bins of 0.25: a point of a face turned away from a view
         # never stands in for one of a face turned towards it).
-        c = np.floor(P / (0.25 * step_mm)).astype(np.int64)
-        q = np.where(np.isnan(N), 4, np.floor(np.nan_to_num(N) * 4.0)).astype(np.int64) + 4
-        cq = np.concatenate([c - c.min(axis=0), q], axis=1)
-        _, first = np.unique(np.ravel_multi_index(cq.T, cq.max(axis=0) + 1), return_index=True)
+        _, first = np.unique(_cell_keys(P, N, 0.25 * step_mm), return_index=True)
         keep = np.sort(first)
         P, N = P[keep], N[keep]
     return (P, N) if return_normals else P
+
+
+def _cell_keys(P: np.ndarray, N: np.ndarray, cell_mm: float) -> np.ndarray:
+    """(n,) int64: one key per (cube of side ``cell_mm``, normal bin of 0.25 per component)
+    of the points ``P`` with unit normals ``N`` (NaN: a bin of its own); equal keys, same cell
+    and bin.  Computed on the components as rows (column reductions of (n, 3) are slow)."""
+    c = np.floor(np.ascontiguousarray(P.T) / cell_mm).astype(np.int64)
+    c -= c.min(axis=1, keepdims=True)
+    d = c.max(axis=1) + 1
+    q = np.floor(np.ascontiguousarray(N.T) * 4.0)
+    q = np.where(np.isnan(q), 4.0, q).astype(np.int64) + 4       # 0 .. 8 (NaN: 8)
+    if float(d[0]) * float(d[1]) * float(d[2]) * 729.0 >= 2.0 ** 62:  # a huge extent
+        cq = np.concatenate([c, q]).T
+        return np.unique(cq, axis=0, return_inverse=True)[1].reshape(-1)
+    key = (c[0] * d[1] + c[1]) * d[2] + c[2]
+    key *= 729
+    key += q[0] * 81 + q[1] * 9 + q[2]
+    return key
 
 
 # ---------------------------------------------------------------------------------- blur
