@@ -27,9 +27,11 @@ module says which pixels those are, from the scene itself (no render):
 
 What it covers: *direct* laser light, ``L (S)* D (S)* E``, as the integrator renders it today.
 Light the laser puts elsewhere by scattering off a non-delta surface first (interreflections,
-a glint carried by a mirror) can land outside it: for such an integrator the support must come
-from a pilot render of that integrator (:func:`pilot_support`) or the full frame must be
-rendered — :func:`lts360.simulator.frame.simulate_frame`'s ``support=`` chooses.
+a glint carried by a mirror) can land outside it.  That light still leaves a shape (a non-delta
+surface) last before the camera: :func:`hull_support` bounds it by every pixel that can see a
+shape at all, from the shapes' convex hulls seen through every view — the support of frames
+with interreflections.  A pilot render (:func:`pilot_support`) is cheaper but misses glints;
+:func:`lts360.simulator.frame.simulate_frame`'s ``support=`` chooses.
 
 Conventions: OpenCV pixels (centres at integers), millimetres, the rendered (scaled) film.
 """
@@ -45,11 +47,14 @@ from lts360.geometry.camera import project_camera_points, scale_intrinsics, worl
 
 __all__ = ["PixelSupport", "SUPPORT_METHODS", "MARGIN_PX", "SAMPLE_SPACING_PX", "PILOT_SPP",
            "PILOT_THRESHOLD", "sheet_slabs", "slab_triangles", "slab_points", "blur_diameter_px",
-           "geometric_support", "pilot_support", "full_support", "support_from_mask",
-           "film_size"]
+           "geometric_support", "hull_support", "pilot_support", "full_support",
+           "support_from_mask", "film_size"]
 
 #: How a frame's rendered pixels are chosen (``simulate_frame(support=...)``).
-SUPPORT_METHODS = ("geometric", "pilot", "full")
+SUPPORT_METHODS = ("geometric", "hull", "pilot", "full")
+#: Largest distance (pixels) between the points of a hull's outline that are distorted and
+#: filled (:func:`hull_support`): the outline's curvature between them is far below a pixel.
+HULL_OUTLINE_STEP_PX = 0.5
 #: Margin added around every image point beyond its defocus blur (pixels of the rendered
 #: film): a lit pixel's centre lies within 0.71 px (its box) of a lit point's image, and that
 #: image within 1.15 · 1.1 px of a sample's (row sampling 0.71 + de-duplication 0.44 spacings of
@@ -464,6 +469,63 @@ def _splat(uv: np.ndarray, radius_px: np.ndarray, shape: tuple[int, int]) -> np.
         canvas[iv[sel] - y0, iu[sel] - x0] = 1
         out[y0:y1, x0:x1] |= cv2.dilate(canvas, kernel)
     return out[pad:pad + h, pad:pad + w].astype(bool)
+
+
+def hull_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_lens: bool = True,
+                 margin_px: float = MARGIN_PX) -> PixelSupport:
+    """Every pixel whose camera path can reach a shape: the support of any light that leaves a
+    shape last (interreflections, glints carried by a mirror, the direct stripe too).
+
+    Light the camera receives through ``≤ max_bounces`` mirror reflections left a non-delta
+    surface last (the integrator renders no emitter directly; the mirrors are delta surfaces).
+    So a pixel holds light only if its rays reach a shape through some view.  For each view
+    (the camera direct and through every mirror sequence, unfolded as in
+    :func:`geometric_support`; no mirror rectangle is tested: a superset), the shapes' vertices
+    are seen in the pinhole's normalised coordinates, where the image of their convex hull is
+    the 2-D convex hull of theirs (a straight projection maps a convex set onto a convex set);
+    its outline, sampled every :data:`HULL_OUTLINE_STEP_PX`, is distorted and filled, then
+    dilated by the largest defocus blur radius of the view's depths plus ``margin_px`` (+ √2/2
+    for the fill's rounding).  A view in which any vertex lies at or behind the camera's plane
+    makes the support the full frame.
+    """
+    import cv2
+
+    if not margin_px >= 0:
+        raise ValueError(f"margin_px must be >= 0, got {margin_px!r}")
+    rig, cam = spec.rig, spec.rig.camera
+    w, h = film_size(cam, scale)
+    K = scale_intrinsics(cam.K, scale)
+    shapes = _scene_shapes(spec)
+    mask = np.zeros((h, w), np.uint8)
+    if not shapes:
+        return PixelSupport(mask=mask.astype(bool), method="hull", margin_px=float(margin_px))
+    V = np.concatenate([v for v, _ in shapes])
+    for A, b in (_compose(rig.mirrors, s) for s in _sequences(rig, max_bounces)):
+        Pc = world_to_camera(V @ A.T + b, cam.R, cam.t_mm)
+        z = Pc[:, 2]
+        if not z.min() > 1e-6:
+            return full_support(cam, scale)
+        xn = (Pc[:, :2] / z[:, None]).astype(np.float32)
+        H = cv2.convexHull(xn)[:, 0, :].astype(float)               # (k, 2), in order
+        E = np.roll(H, -1, axis=0) - H
+        n = np.maximum(1, np.ceil(np.hypot(E[:, 0] * K[0, 0], E[:, 1] * K[1, 1])
+                                  / HULL_OUTLINE_STEP_PX)).astype(np.int64)
+        k = np.repeat(np.arange(len(H)), n)
+        f = (np.arange(k.size) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n, n)
+        outline = H[k] + f[:, None] * E[k]
+        uv = project_camera_points(np.column_stack([outline, np.ones(len(outline))]), K,
+                                   cam.distortion)
+        view = np.zeros((h, w), np.uint8)
+        cv2.fillPoly(view, [np.rint(uv * 16.0).astype(np.int32)], 1, lineType=cv2.LINE_8,
+                     shift=4)
+        blur = float(blur_diameter_px(np.array([z.min(), z.max()]), cam, scale=scale,
+                                      thin_lens=thin_lens).max())
+        r = 0.5 * blur + margin_px + math.sqrt(0.5)
+        rr = int(math.floor(r))
+        d = np.arange(-rr, rr + 1)
+        kernel = ((d[:, None] ** 2 + d[None, :] ** 2) <= r * r).astype(np.uint8)
+        mask |= cv2.dilate(view, kernel)
+    return PixelSupport(mask=mask.astype(bool), method="hull", margin_px=float(margin_px))
 
 
 def support_from_mask(lit: np.ndarray, *, margin_px: float, method: str) -> PixelSupport:
