@@ -499,13 +499,16 @@ def hull_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_lens: b
     mask = np.zeros((h, w), np.uint8)
     if not shapes:
         return PixelSupport(mask=mask.astype(bool), method="hull", margin_px=float(margin_px))
-    V = np.concatenate([v for v, _ in shapes])
+    # The vertices as rows (3, n): each view's camera coordinates row by row (an (n, 3) @ (3, 3)
+    # product goes through a threaded BLAS that costs ten times as much on a busy machine).
+    Vt = np.ascontiguousarray(np.concatenate([v for v, _ in shapes]).T)
+    R, t_cam = np.asarray(cam.R, float), np.asarray(cam.t_mm, float).reshape(3)
     for A, b in (_compose(rig.mirrors, s) for s in _sequences(rig, max_bounces)):
-        Pc = world_to_camera(V @ A.T + b, cam.R, cam.t_mm)
-        z = Pc[:, 2]
+        M, c = R @ A, R @ b + t_cam                 # X_cam = M X + c of the unfolded point
+        x, y, z = (M[i, 0] * Vt[0] + M[i, 1] * Vt[1] + M[i, 2] * Vt[2] + c[i] for i in range(3))
         if not z.min() > 1e-6:
             return full_support(cam, scale)
-        xn = (Pc[:, :2] / z[:, None]).astype(np.float32)
+        xn = np.column_stack([x / z, y / z]).astype(np.float32)
         H = cv2.convexHull(xn)[:, 0, :].astype(float)               # (k, 2), in order
         E = np.roll(H, -1, axis=0) - H
         n = np.maximum(1, np.ceil(np.hypot(E[:, 0] * K[0, 0], E[:, 1] * K[1, 1])
