@@ -195,7 +195,11 @@ def _clip_to_slab(V: np.ndarray, F: np.ndarray, normal, d: float, half: float):
     from trimesh.intersections import slice_faces_plane
 
     h = V @ normal - d
-    keep = np.flatnonzero((h[F].min(axis=1) <= half) & (h[F].max(axis=1) >= -half))
+    # The faces' least and largest h from their three corners (a min / max along the rows of
+    # an (n, 3) array is ~20 times slower than the two element-wise ones).
+    h0, h1, h2 = h[F[:, 0]], h[F[:, 1]], h[F[:, 2]]
+    keep = np.flatnonzero((np.minimum(np.minimum(h0, h1), h2) <= half)
+                          & (np.maximum(np.maximum(h0, h1), h2) >= -half))
     if keep.size == 0:
         return np.zeros((0, 3)), np.zeros((0, 3), int)
     used, F1 = np.unique(F[keep], return_inverse=True)
