@@ -174,7 +174,7 @@ def sheet_slabs(rig, vertices_world_mm: np.ndarray, max_bounces: int = 2) -> lis
     # The sheet is thickest farthest from its waist: bound the distance from the apex by the
     # shapes' bounding box (a mirror image is as far from the virtual apex as the point is
     # from the real one along the unfolded path: unfold the box's corners).
-    corners = (np.array(np.meshgrid(*zip(P.min(axis=0), P.max(axis=0)))).reshape(3, -1).T
+    corners = (np.array(np.meshgrid(*zip(*_bounds(P)))).reshape(3, -1).T
                if len(P) else O[None, :])
     out: list[tuple] = []
     for seq in _sequences(rig, max_bounces):
@@ -188,6 +188,13 @@ def sheet_slabs(rig, vertices_world_mm: np.ndarray, max_bounces: int = 2) -> lis
             continue
         out.append((normal, d, half))
     return out
+
+
+def _bounds(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least and largest coordinate of the points ``P`` (n, 3), column by column (a reduction
+    along axis 0 of an (n, 3) array is ~25 times slower)."""
+    return (np.array([P[:, k].min() for k in range(3)]),
+            np.array([P[:, k].max() for k in range(3)]))
 
 
 def _clip_to_slab(V: np.ndarray, F: np.ndarray, normal, d: float, half: float):
@@ -367,7 +374,7 @@ def geometric_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_le
     # Depth is affine in the point: its minimum over the clipped triangles' bounding box is
     # at a corner, and bounds theirs from below (finer spacing, never coarser).
     tv = tris.reshape(-1, 3)
-    box = np.array(np.meshgrid(*zip(tv.min(axis=0), tv.max(axis=0)))).reshape(3, -1).T
+    box = np.array(np.meshgrid(*zip(*_bounds(tv)))).reshape(3, -1).T
     zmin = min(_depth_range(box @ A.T + b, cam)[0] for A, b in maps)
     if not (math.isfinite(zmin) and all(np.all(world_to_camera(box @ A.T + b, cam.R, cam.t_mm)
                                                 [:, 2] > 1e-6) for A, b in maps)):
