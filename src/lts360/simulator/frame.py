@@ -113,8 +113,11 @@ def simulate_frame(rig: Rig, obj: SceneObject, *, spp: int = DEFAULT_SPP, seed: 
     if noise not in NOISE_MODES:
         raise ValueError(f"noise must be one of {', '.join(NOISE_MODES)}, got {noise!r}")
     T_stage = stage_transform(z_mm)
-    mesh = obj.mesh_world()
-    mesh.apply_transform(T_stage)
+    mesh = obj.mesh_world()                         # a copy
+    # The stage is a translation: its vertices moved in place, the numbers apply_transform
+    # gives (x·1 + y·0 + z·0 + t), without trimesh's copy and bookkeeping (~90 ms for the
+    # grooved shaft's 475 529 vertices).
+    mesh.vertices += T_stage[:3, 3]
     meshes = (("object", mesh, material_to_bsdf(obj.material)),) + tuple(extra_meshes)
     spec = SceneSpec(rig, meshes, ambient=ambient, background_z_mm=background_z_mm)
     res, sup = render_frame(spec, spp=spp, seed=seed, scale=scale, max_bounces=max_bounces,
