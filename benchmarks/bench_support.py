@@ -15,6 +15,10 @@ disturb far less than the wall clock):
 * ``frame_noise_free_256_support``: the same on the pixel support;
 * ``frame_realistic_16_reused``: the first row on a scene built once (``SceneCache``: the
   scene and the support are looked up, as a study's repeated frames do);
+* ``frame_scatter_16``: the first row with one bounce of interreflected light
+  (``max_scatter=1``, as the shiny examples render), the default support (the hull support
+  where the code has one, else the full frame);
+* ``frame_scatter_16_full``: the same with ``support="full"``;
 * ``render_full_16``: :func:`render_radiance`, the full frame alone;
 * ``sensor_realistic_16``: the sensor alone (:func:`sensor_image`, realistic noise, no
   speckle) on the render of one 16-spp frame: photo-electrons, the Poisson and read-noise
@@ -44,8 +48,9 @@ import time
 from pathlib import Path
 
 ROWS = ("frame_realistic_16", "frame_realistic_16_moved", "frame_realistic_16_full", "frame_realistic_16_support",
-        "frame_noise_free_256", "frame_noise_free_256_support", "frame_realistic_16_reused", "render_full_16", "sensor_realistic_16", "speckle_keyed",
-        "speckle_bbox")
+        "frame_noise_free_256", "frame_noise_free_256_support", "frame_realistic_16_reused",
+        "frame_scatter_16", "frame_scatter_16_full", "render_full_16", "sensor_realistic_16",
+        "speckle_keyed", "speckle_bbox")
 
 
 def main(argv=None) -> None:
@@ -93,6 +98,12 @@ def main(argv=None) -> None:
             rig, obj, spp=256, seed=1, noise="none", support="geometric")
         fns["frame_realistic_16_reused"] = lambda: simulate_frame(
             rig, obj, spp=16, seed=1, noise="realistic", scenes=cache)
+    if "max_scatter" in inspect.signature(simulate_frame).parameters:
+        fns["frame_scatter_16"] = lambda: simulate_frame(
+            rig, obj, spp=16, seed=1, noise="realistic", max_scatter=1)
+        if has_support:
+            fns["frame_scatter_16_full"] = lambda: simulate_frame(
+                rig, obj, spp=16, seed=1, noise="realistic", max_scatter=1, support="full")
     if "sensor_realistic_16" in args.rows.split(","):
         from lts360.simulator import frame as frame_mod
 

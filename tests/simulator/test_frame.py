@@ -155,8 +155,10 @@ def test_frame_rendered_on_a_pixel_window(variant):
     assert win.truth["render"]["pixels"] == len(px)
     assert np.all(win.render.radiance_W_m2_sr[~near] == 0)
     a, b = full.render.laser_W_m2_sr[near], win.render.laser_W_m2_sr[near]
-    # The stripe's total laser radiance agrees to the Monte Carlo noise of 16 spp (~1 %).
-    assert abs(b.sum() / a.sum() - 1.0) < 0.02
+    # The stripe's total laser radiance agrees to the Monte Carlo noise of 16 spp: the ratio of
+    # two full frames' totals (other seeds) scatters with sd 1.4 % at this scale (8 seed pairs,
+    # 2026-12-05), so 3 sd.
+    assert abs(b.sum() / a.sum() - 1.0) < 0.045
     assert np.corrcoef(a, b)[0, 1] > 0.95
     with pytest.raises(ValueError, match="inside"):
         simulate_frame(rig, obj, spp=1, seed=2, noise="none", scale=0.25,

@@ -192,11 +192,14 @@ def test_tiles_have_the_patterns_contrast_and_correlation():
     lit[200:500, 300:303] = True     # a vertical one: 10 tiles
     P = SP.speckle_on_tiles(lit, rng=7, **kw)
     assert P.shape == lit.shape and P.dtype == np.float32
-    T = SP.SPECKLE_TILE_PX
-    tiles = np.zeros((512 // T, 640 // T), bool)
-    tiles[100 // T, :] = True
-    tiles[200 // T:500 // T + 1, 300 // T] = True
-    on = np.kron(tiles, np.ones((T, T), bool))
+    T = SP.keyed_tile_px(**kw)
+    assert SP.SPECKLE_TILE_PX * 3 // 4 <= T <= SP.SPECKLE_TILE_PX
+    # Computed: each lit tile's groups of _ROW_GROUP rows that hold a lit pixel of the tile.
+    G = SP._ROW_GROUP
+    ys, xs = np.mgrid[:512, :640]
+    groups = {(y // T, x // T, (y % T) // G) for y, x in zip(*np.nonzero(lit))}
+    on = np.array([(y // T, x // T, (y % T) // G) in groups
+                   for y, x in zip(ys.ravel(), xs.ravel())]).reshape(lit.shape)
     assert np.all(P[~on] == 1.0) and np.all(P[on] != 1.0)
     assert np.array_equal(P, SP.speckle_on_tiles(lit, rng=7, **kw))
     theory = SP.speckle_contrast_theory(**kw)
@@ -208,7 +211,8 @@ def test_tiles_have_the_patterns_contrast_and_correlation():
     def corr(a, lag):
         return np.corrcoef(a[..., :-lag].ravel(), a[..., lag:].ravel())[0, 1]
 
-    row = P[100 // T * T:100 // T * T + T]          # the horizontal stripe's 20 tiles in a row
+    g0 = 100 // T * T + (100 % T) // G * G
+    row = P[g0:g0 + G]                              # the horizontal stripe's 20 tiles in a row
     for lag in (1, 2):
         # Correlation estimates from ~20 000 pixel pairs: ±0.02 (their sampling error).
         assert corr(row, lag) == pytest.approx(corr(whole, lag), abs=0.03)
@@ -228,7 +232,7 @@ def test_keyed_speckle_is_a_function_of_position():
     part[140:160, 200:300] = lit[140:160, 200:300]
     B = SP.speckle_on_tiles(part, rng=11, **kw)
     on = B != 1.0
-    assert on.sum() >= 32 * 32 * 2 and np.array_equal(A[on], B[on])
+    assert on.sum() >= 600 and np.array_equal(A[on], B[on])   # 4 tiles × 8 rows
     C = SP.speckle_on_tiles(lit, rng=11, tile_px=48, **kw)
     both = (A != 1.0) & (C != 1.0)
     # float32 FFTs of other lengths: agreement to ~1e-6 of the values (3e-5 with margin).
@@ -257,3 +261,27 @@ def test_keyed_contrast_mean_and_polarisation(f_number):
     assert D.std() / P.std() == pytest.approx(1 / math.sqrt(2), rel=CONTRAST_RTOL)
     half = SP.speckle_on_tiles(lit, rng=0, contrast_scale=0.5, **kw)
     np.testing.assert_allclose(half, 1 + 0.5 * (P[0] - 1), atol=1e-6)
+
+
+def test_keyed_tiles_take_a_smooth_fft_length():
+    """The tile side is the largest within a quarter below ``tile_px`` whose padded tile is a
+    2-3-5-smooth FFT length (the paper rig at f/2.8: 31 px, 256 fine samples); a pixel's value
+    is the same at another side (to float32 rounding), and never below the PSF's diameter."""
+    kw = dict(f_number=2.8, magnification=0.043, **PAPER)
+    T = SP.keyed_tile_px(**kw)
+    s = SP.auto_oversample(PAPER["pixel_pitch_um"], PAPER["wavelength_nm"], 2.8, 0.043)
+    fcd = SP.coherent_cutoff_cyc_per_um(PAPER["wavelength_nm"], 2.8, 0.043) \
+        * PAPER["pixel_pitch_um"] / s
+    radius = math.ceil(SP.KEYED_PSF_RADIUS / (2.0 * fcd))
+    n = T * s + 2 * radius
+    assert 24 <= T <= 32 and SP._fft_len(n) == n
+    assert all(SP._fft_len(t * s + 2 * radius) != t * s + 2 * radius for t in range(T + 1, 33))
+    assert SP.keyed_tile_px(tile_px=4, **kw) == 2 * -(-radius // s)
+    lit = np.zeros((96, 96), bool)
+    lit[40:44, 10:90] = True
+    A = SP.speckle_on_tiles(lit, rng=5, **kw)
+    assert SP.keyed_tile_px(tile_px=T - 1, **kw) < T
+    B = SP.speckle_on_tiles(lit, rng=5, tile_px=T - 1, **kw)   # another tile grid
+    both = (A != 1.0) & (B != 1.0)
+    assert both.sum() >= 320
+    np.testing.assert_allclose(A[both], B[both], rtol=3e-5, atol=3e-5)

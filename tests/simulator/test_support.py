@@ -76,6 +76,45 @@ def test_support_holds_every_pixel_with_laser_light(variant, rig, name, tmp_path
     assert 0.005 < sup.fraction < 0.15
 
 
+@pytest.mark.parametrize("name", list(object_types()))
+def test_hull_support_holds_every_pixel_with_interreflected_light(variant, rig, name, tmp_path):
+    """With interreflections (one scatter) every laser-lit pixel of a full render, glints and
+    light carried by the mirrors included, lies in the hull support (every pixel that can see
+    a shape), which is a part of the frame only; frames with interreflections render on it."""
+    from lts360.simulator.frame import render_frame
+    from lts360.simulator.render import render_radiance
+    from lts360.simulator.support import hull_support
+
+    spec = _spec(rig, _object(name, tmp_path))
+    sup = hull_support(spec, scale=SCALE)
+    laser = render_radiance(spec, spp=4, seed=3, scale=SCALE, max_scatter=1).laser_W_m2_sr
+    assert laser.max() > 0
+    assert not np.any(laser[~sup.mask] > 0)
+    assert sup.fraction < 0.6
+    res, used = render_frame(spec, spp=1, seed=3, scale=SCALE, max_scatter=1)
+    assert used.method == "hull" and np.array_equal(used.mask, sup.mask)
+    assert not np.any(res.laser_W_m2_sr[~sup.mask]) and res.laser_W_m2_sr.max() > 0
+
+
+def test_hull_support_is_the_full_frame_when_a_shape_reaches_the_camera(variant, rig):
+    """A shape reaching behind the camera's plane in some view has no bounded image: the full
+    frame; the 400 mm base plate below the object fills the frame through its hull."""
+    import trimesh
+
+    from lts360.simulator.scene import SceneSpec
+    from lts360.simulator.support import hull_support
+
+    spec = _spec(rig, build_object("plug-gauge"))
+    assert hull_support(spec, scale=SCALE).fraction < 0.3
+    roof = trimesh.creation.box(extents=(400.0, 400.0, 1.0))
+    roof.apply_translation((0.0, 0.0, rig.camera.center_mm[2] + 80.0))   # over the camera
+    sup = hull_support(SceneSpec(rig, spec.meshes + (("roof", roof, spec.meshes[0][2]),)),
+                       scale=SCALE)
+    assert sup.method == "full" and sup.fraction == 1.0
+    plate = hull_support(SceneSpec(rig, spec.meshes, background_z_mm=-30.0), scale=SCALE)
+    assert plate.method == "hull" and plate.fraction == 1.0
+
+
 @pytest.mark.parametrize("noise", ["none", "realistic"])
 def test_support_frame_has_the_full_frames_statistics(variant, rig, noise):
     """Plug gauge, both noise modes: outside the support the band frame's pixels are the full
@@ -170,6 +209,26 @@ def test_ambient_fills_the_pixels_outside_the_support(variant, rig):
     # The ambient render (4 spp) and the full render (4 spp) are two realisations of the same
     # image: their means over ~75 000 pixels agree to 1 %.
     assert a.mean() == pytest.approx(b.mean(), rel=0.01)
+
+
+def test_splat_covers_each_disk_and_no_more_than_its_rounding():
+    """Each point marks every pixel centre within its radius of the exact point (whatever its
+    sub-pixel position), and none farther than radius + √2/2 from the pixel it rounds to (the
+    disk of integer offsets, not a rasterised ellipse a pixel wider)."""
+    from lts360.simulator.support import _splat
+
+    rng = np.random.default_rng(5)
+    uv = rng.uniform(10, 50, size=(40, 2))
+    r = rng.uniform(0.0, 6.0, size=40)
+    mask = _splat(uv, r, (64, 64))
+    yy, xx = np.mgrid[:64, :64]
+    inner = np.zeros_like(mask)
+    outer = np.zeros_like(mask)
+    for (u, v), ri in zip(uv, r):
+        inner |= (xx - u) ** 2 + (yy - v) ** 2 <= ri ** 2
+        outer |= (xx - np.rint(u)) ** 2 + (yy - np.rint(v)) ** 2 <= (ri + np.sqrt(0.5)) ** 2 + 1e-9
+    assert np.all(mask[inner]) and not np.any(mask & ~outer)
+    assert np.array_equal(mask, outer)
 
 
 def test_support_is_refused_bad_input(variant, rig):
@@ -267,14 +326,14 @@ def test_band_frame_and_full_frame_measure_the_same_radius(variant, rig):
 
 def test_cli_renders_the_support_by_default_and_the_full_frame_on_request(variant, tmp_path):
     """``lts360 render`` renders the support; ``--support full`` (``--full-frame``) every pixel; with
-    ``--max-scatter`` > 0 the geometric support gives way to the full frame; a scan builds its
+    ``--max-scatter`` > 0 the geometric support gives way to the hull support; a scan builds its
     scene once (each section moves the object)."""
     import json
 
     from lts360.cli import main
 
     for extra, method in (([], "geometric"), (["--support", "full"], "full"),
-                          (["--full-frame"], "full"), (["--max-scatter", "1"], "full")):
+                          (["--full-frame"], "full"), (["--max-scatter", "1"], "hull")):
         out = tmp_path / "_".join([method] + extra)
         assert main(["render", "--object", "plug-gauge", "--out", str(out), "--scale", "0.125",
                      "--spp", "1", "--sections", "2", "--pitch-mm", "0.5"] + extra) == 0

@@ -91,6 +91,10 @@ class RenderResult:
     seed : int
     seconds : float
         Wall time of the render call.
+    held_index : (n,) int64, optional
+        Sorted flat indices of the pixels rendered (a support frame without ambient light):
+        every other pixel holds no light, 0 in both images.  ``None``: not known (any pixel
+        may hold light).  Lets the sensor find the lit pixels without scanning the frame.
     """
 
     radiance_W_m2_sr: np.ndarray
@@ -100,6 +104,7 @@ class RenderResult:
     spp: int
     seed: int
     seconds: float
+    held_index: np.ndarray | None = None
 
 
 #: The most samples per pixel a render takes (beyond it a frame costs minutes on a CPU and the

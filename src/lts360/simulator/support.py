@@ -27,9 +27,11 @@ module says which pixels those are, from the scene itself (no render):
 
 What it covers: *direct* laser light, ``L (S)* D (S)* E``, as the integrator renders it today.
 Light the laser puts elsewhere by scattering off a non-delta surface first (interreflections,
-a glint carried by a mirror) can land outside it: for such an integrator the support must come
-from a pilot render of that integrator (:func:`pilot_support`) or the full frame must be
-rendered — :func:`lts360.simulator.frame.simulate_frame`'s ``support=`` chooses.
+a glint carried by a mirror) can land outside it.  That light still leaves a shape (a non-delta
+surface) last before the camera: :func:`hull_support` bounds it by every pixel that can see a
+shape at all, from the shapes' convex hulls seen through every view — the support of frames
+with interreflections.  A pilot render (:func:`pilot_support`) is cheaper but misses glints;
+:func:`lts360.simulator.frame.simulate_frame`'s ``support=`` chooses.
 
 Conventions: OpenCV pixels (centres at integers), millimetres, the rendered (scaled) film.
 """
@@ -45,11 +47,14 @@ from lts360.geometry.camera import project_camera_points, scale_intrinsics, worl
 
 __all__ = ["PixelSupport", "SUPPORT_METHODS", "MARGIN_PX", "SAMPLE_SPACING_PX", "PILOT_SPP",
            "PILOT_THRESHOLD", "sheet_slabs", "slab_triangles", "slab_points", "blur_diameter_px",
-           "geometric_support", "pilot_support", "full_support", "support_from_mask",
-           "film_size"]
+           "geometric_support", "hull_support", "pilot_support", "full_support",
+           "support_from_mask", "film_size"]
 
 #: How a frame's rendered pixels are chosen (``simulate_frame(support=...)``).
-SUPPORT_METHODS = ("geometric", "pilot", "full")
+SUPPORT_METHODS = ("geometric", "hull", "pilot", "full")
+#: Largest distance (pixels) between the points of a hull's outline that are distorted and
+#: filled (:func:`hull_support`): the outline's curvature between them is far below a pixel.
+HULL_OUTLINE_STEP_PX = 0.5
 #: Margin added around every image point beyond its defocus blur (pixels of the rendered
 #: film): a lit pixel's centre lies within 0.71 px (its box) of a lit point's image, and that
 #: image within 1.15 · 1.1 px of a sample's (row sampling 0.71 + de-duplication 0.44 spacings of
@@ -169,7 +174,7 @@ def sheet_slabs(rig, vertices_world_mm: np.ndarray, max_bounces: int = 2) -> lis
     # The sheet is thickest farthest from its waist: bound the distance from the apex by the
     # shapes' bounding box (a mirror image is as far from the virtual apex as the point is
     # from the real one along the unfolded path: unfold the box's corners).
-    corners = (np.array(np.meshgrid(*zip(P.min(axis=0), P.max(axis=0)))).reshape(3, -1).T
+    corners = (np.array(np.meshgrid(*zip(*_bounds(P)))).reshape(3, -1).T
                if len(P) else O[None, :])
     out: list[tuple] = []
     for seq in _sequences(rig, max_bounces):
@@ -185,12 +190,23 @@ def sheet_slabs(rig, vertices_world_mm: np.ndarray, max_bounces: int = 2) -> lis
     return out
 
 
+def _bounds(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least and largest coordinate of the points ``P`` (n, 3), column by column (a reduction
+    along axis 0 of an (n, 3) array is ~25 times slower)."""
+    return (np.array([P[:, k].min() for k in range(3)]),
+            np.array([P[:, k].max() for k in range(3)]))
+
+
 def _clip_to_slab(V: np.ndarray, F: np.ndarray, normal, d: float, half: float):
     """The parts of the triangles ``(V, F)`` inside the slab, as triangles (vertices, faces)."""
     from trimesh.intersections import slice_faces_plane
 
     h = V @ normal - d
-    keep = np.flatnonzero((h[F].min(axis=1) <= half) & (h[F].max(axis=1) >= -half))
+    # The faces' least and largest h from their three corners (a min / max along the rows of
+    # an (n, 3) array is ~20 times slower than the two element-wise ones).
+    h0, h1, h2 = h[F[:, 0]], h[F[:, 1]], h[F[:, 2]]
+    keep = np.flatnonzero((np.minimum(np.minimum(h0, h1), h2) <= half)
+                          & (np.maximum(np.maximum(h0, h1), h2) >= -half))
     if keep.size == 0:
         return np.zeros((0, 3)), np.zeros((0, 3), int)
     used, F1 = np.unique(F[keep], return_inverse=True)
@@ -275,13 +291,28 @@ def slab_points(tris: np.ndarray, *, step_mm: float, return_normals: bool = Fals
         # side step/4 (a dropped point lies within step/4·√3 < 0.44 step of a kept one) and
         # per facing (normals in bins of 0.25: a point of a face turned away from a view
         # never stands in for one of a face turned towards it).
-        c = np.floor(P / (0.25 * step_mm)).astype(np.int64)
-        q = np.where(np.isnan(N), 4, np.floor(np.nan_to_num(N) * 4.0)).astype(np.int64) + 4
-        cq = np.concatenate([c - c.min(axis=0), q], axis=1)
-        _, first = np.unique(np.ravel_multi_index(cq.T, cq.max(axis=0) + 1), return_index=True)
+        _, first = np.unique(_cell_keys(P, N, 0.25 * step_mm), return_index=True)
         keep = np.sort(first)
         P, N = P[keep], N[keep]
     return (P, N) if return_normals else P
+
+
+def _cell_keys(P: np.ndarray, N: np.ndarray, cell_mm: float) -> np.ndarray:
+    """(n,) int64: one key per (cube of side ``cell_mm``, normal bin of 0.25 per component)
+    of the points ``P`` with unit normals ``N`` (NaN: a bin of its own); equal keys, same cell
+    and bin.  Computed on the components as rows (column reductions of (n, 3) are slow)."""
+    c = np.floor(np.ascontiguousarray(P.T) / cell_mm).astype(np.int64)
+    c -= c.min(axis=1, keepdims=True)
+    d = c.max(axis=1) + 1
+    q = np.floor(np.ascontiguousarray(N.T) * 4.0)
+    q = np.where(np.isnan(q), 4.0, q).astype(np.int64) + 4       # 0 .. 8 (NaN: 8)
+    if float(d[0]) * float(d[1]) * float(d[2]) * 729.0 >= 2.0 ** 62:  # a huge extent
+        cq = np.concatenate([c, q]).T
+        return np.unique(cq, axis=0, return_inverse=True)[1].reshape(-1)
+    key = (c[0] * d[1] + c[1]) * d[2] + c[2]
+    key *= 729
+    key += q[0] * 81 + q[1] * 9 + q[2]
+    return key
 
 
 # ---------------------------------------------------------------------------------- blur
@@ -343,7 +374,7 @@ def geometric_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_le
     # Depth is affine in the point: its minimum over the clipped triangles' bounding box is
     # at a corner, and bounds theirs from below (finer spacing, never coarser).
     tv = tris.reshape(-1, 3)
-    box = np.array(np.meshgrid(*zip(tv.min(axis=0), tv.max(axis=0)))).reshape(3, -1).T
+    box = np.array(np.meshgrid(*zip(*_bounds(tv)))).reshape(3, -1).T
     zmin = min(_depth_range(box @ A.T + b, cam)[0] for A, b in maps)
     if not (math.isfinite(zmin) and all(np.all(world_to_camera(box @ A.T + b, cam.R, cam.t_mm)
                                                 [:, 2] > 1e-6) for A, b in maps)):
@@ -358,15 +389,18 @@ def geometric_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_le
     # edge is blurred over that much (plus 1 mm).
     edge_mm = cam.aperture_diameter_mm + 1.0 if thin_lens else 1.0
     no_normal = np.isnan(normals[:, 0])
+    # n · (c − p) and |c − p|² for every view's camera c from n · p and |p|², computed once.
+    n_dot_p = np.einsum("ij,ij->i", normals, pts)
+    p_dot_p = np.einsum("ij,ij->i", pts, pts)
     for seq, (A, b) in zip(_sequences(rig, max_bounces), maps):
         # One-sided surfaces (no BSDF here is two-sided): a point seen from behind its face
         # holds no light for this view.  The pupil's rays reach up to ~1° around the chief
         # ray: keep faces down to BACKFACE_COS edge-on.  Tested where the points are, against
         # the camera centre unfolded by the view's mirrors (A is orthogonal: the angle and the
         # distance are those of the mirror image and the camera).
-        to_cam = A.T @ (C - b) - pts
-        facing = np.einsum("ij,ij->i", normals, to_cam) \
-            > -BACKFACE_COS * np.sqrt(np.einsum("ij,ij->i", to_cam, to_cam))
+        c = A.T @ (C - b)
+        dist2 = np.maximum(float(c @ c) - 2.0 * (pts @ c) + p_dot_p, 0.0)
+        facing = normals @ c - n_dot_p > -BACKFACE_COS * np.sqrt(dist2)
         # The mirror checks and the projection on the points that face the view only (half of
         # them: a convex object turns half its section away).
         Xv = pts[facing | no_normal] @ A.T + b
@@ -421,29 +455,91 @@ def _depth_range(P_world: np.ndarray, cam) -> tuple[float, float]:
 
 
 def _splat(uv: np.ndarray, radius_px: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """Mask of every pixel centre within ``radius_px`` of a point ``uv`` (points rounded to
-    their pixel and grouped by their radius + √2/2 rounded up, each group dilated by a disk of
-    that radius)."""
+    """Mask of every pixel centre within ``radius_px`` of a point ``uv``: the points are rounded
+    to their pixel, which moves them by ≤ √2/2 px, so each is dilated by the disk of radius
+    ``radius_px + √2/2`` — the integer offsets ``(dx, dy)`` with ``dx² + dy² ≤ R²`` exactly
+    (points grouped by ``⌊R²⌋``, which fixes the offsets, each group dilated once)."""
     import cv2
 
     h, w = shape
-    # Rounding a point's image to its pixel moves it by ≤ √2/2 px: the disk is that much wider.
-    R = np.ceil(radius_px + np.sqrt(0.5)).astype(np.int64)
-    pad = int(R.max()) + 1
+    R = radius_px + np.sqrt(0.5)
+    key = np.floor(R * R + 1e-9).astype(np.int64)        # offsets have integer d²
+    pad = math.isqrt(int(key.max())) + 1
     iu = np.rint(uv[:, 0]).astype(np.int64) + pad
     iv = np.rint(uv[:, 1]).astype(np.int64) + pad
     inside = (iu >= 0) & (iu < w + 2 * pad) & (iv >= 0) & (iv < h + 2 * pad)
     out = np.zeros((h + 2 * pad, w + 2 * pad), np.uint8)
-    for r in np.unique(R[inside]):
-        sel = inside & (R == r)
-        rr = int(r)
-        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * rr + 1, 2 * rr + 1))
+    for k in np.unique(key[inside]).tolist():
+        sel = inside & (key == k)
+        rr = math.isqrt(k)
+        d = np.arange(-rr, rr + 1)
+        kernel = ((d[:, None] ** 2 + d[None, :] ** 2) <= k).astype(np.uint8)
         x0, x1 = max(0, iu[sel].min() - rr), min(out.shape[1], iu[sel].max() + rr + 1)
         y0, y1 = max(0, iv[sel].min() - rr), min(out.shape[0], iv[sel].max() + rr + 1)
         canvas = np.zeros((y1 - y0, x1 - x0), np.uint8)
         canvas[iv[sel] - y0, iu[sel] - x0] = 1
         out[y0:y1, x0:x1] |= cv2.dilate(canvas, kernel)
     return out[pad:pad + h, pad:pad + w].astype(bool)
+
+
+def hull_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_lens: bool = True,
+                 margin_px: float = MARGIN_PX) -> PixelSupport:
+    """Every pixel whose camera path can reach a shape: the support of any light that leaves a
+    shape last (interreflections, glints carried by a mirror, the direct stripe too).
+
+    Light the camera receives through ``≤ max_bounces`` mirror reflections left a non-delta
+    surface last (the integrator renders no emitter directly; the mirrors are delta surfaces).
+    So a pixel holds light only if its rays reach a shape through some view.  For each view
+    (the camera direct and through every mirror sequence, unfolded as in
+    :func:`geometric_support`; no mirror rectangle is tested: a superset), the shapes' vertices
+    are seen in the pinhole's normalised coordinates, where the image of their convex hull is
+    the 2-D convex hull of theirs (a straight projection maps a convex set onto a convex set);
+    its outline, sampled every :data:`HULL_OUTLINE_STEP_PX`, is distorted and filled, then
+    dilated by the largest defocus blur radius of the view's depths plus ``margin_px`` (+ √2/2
+    for the fill's rounding).  A view in which any vertex lies at or behind the camera's plane
+    makes the support the full frame.
+    """
+    import cv2
+
+    if not margin_px >= 0:
+        raise ValueError(f"margin_px must be >= 0, got {margin_px!r}")
+    rig, cam = spec.rig, spec.rig.camera
+    w, h = film_size(cam, scale)
+    K = scale_intrinsics(cam.K, scale)
+    shapes = _scene_shapes(spec)
+    mask = np.zeros((h, w), np.uint8)
+    if not shapes:
+        return PixelSupport(mask=mask.astype(bool), method="hull", margin_px=float(margin_px))
+    # The vertices as rows (3, n): each view's camera coordinates row by row (an (n, 3) @ (3, 3)
+    # product goes through a threaded BLAS that costs ten times as much on a busy machine).
+    Vt = np.ascontiguousarray(np.concatenate([v for v, _ in shapes]).T)
+    R, t_cam = np.asarray(cam.R, float), np.asarray(cam.t_mm, float).reshape(3)
+    for A, b in (_compose(rig.mirrors, s) for s in _sequences(rig, max_bounces)):
+        M, c = R @ A, R @ b + t_cam                 # X_cam = M X + c of the unfolded point
+        x, y, z = (M[i, 0] * Vt[0] + M[i, 1] * Vt[1] + M[i, 2] * Vt[2] + c[i] for i in range(3))
+        if not z.min() > 1e-6:
+            return full_support(cam, scale)
+        xn = np.column_stack([x / z, y / z]).astype(np.float32)
+        H = cv2.convexHull(xn)[:, 0, :].astype(float)               # (k, 2), in order
+        E = np.roll(H, -1, axis=0) - H
+        n = np.maximum(1, np.ceil(np.hypot(E[:, 0] * K[0, 0], E[:, 1] * K[1, 1])
+                                  / HULL_OUTLINE_STEP_PX)).astype(np.int64)
+        k = np.repeat(np.arange(len(H)), n)
+        f = (np.arange(k.size) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n, n)
+        outline = H[k] + f[:, None] * E[k]
+        uv = project_camera_points(np.column_stack([outline, np.ones(len(outline))]), K,
+                                   cam.distortion)
+        view = np.zeros((h, w), np.uint8)
+        cv2.fillPoly(view, [np.rint(uv * 16.0).astype(np.int32)], 1, lineType=cv2.LINE_8,
+                     shift=4)
+        blur = float(blur_diameter_px(np.array([z.min(), z.max()]), cam, scale=scale,
+                                      thin_lens=thin_lens).max())
+        r = 0.5 * blur + margin_px + math.sqrt(0.5)
+        rr = int(math.floor(r))
+        d = np.arange(-rr, rr + 1)
+        kernel = ((d[:, None] ** 2 + d[None, :] ** 2) <= r * r).astype(np.uint8)
+        mask |= cv2.dilate(view, kernel)
+    return PixelSupport(mask=mask.astype(bool), method="hull", margin_px=float(margin_px))
 
 
 def support_from_mask(lit: np.ndarray, *, margin_px: float, method: str) -> PixelSupport:
