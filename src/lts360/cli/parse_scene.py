@@ -63,11 +63,13 @@ def _add_render_parser(sub) -> None:
                    help="add a matte black base plate at this height (default: none)")
     s.add_argument("--sections", type=int, default=1, help="render a scan of N sections")
     s.add_argument("--pitch-mm", type=float, default=0.0, help="stage pitch of a scan (mm)")
-    s.add_argument("--support", choices=("full", "geometric", "pilot"), default="geometric",
+    s.add_argument("--support", choices=("full", "geometric", "hull", "pilot"),
+                   default="geometric",
                    help="which pixels are rendered: only those that can hold laser light, found "
-                        "from the scene's geometry (default; direct laser light, every pixel "
-                        "with --max-scatter > 0) or from a 4-spp pilot render, the rest getting "
-                        "ambient light and sensor noise; or every one (full)")
+                        "from the scene's geometry (default: the stripe for direct laser light; "
+                        "with --max-scatter > 0 every pixel that can see a shape, as 'hull') "
+                        "or from a 4-spp pilot render, the rest getting ambient light and "
+                        "sensor noise; or every one (full)")
     s.add_argument("--full-frame", dest="support", action="store_const", const="full",
                    help="render every pixel (the same as --support full)")
     m = s.add_argument_group("line motion (a moving object; needs --exposure-us)")
