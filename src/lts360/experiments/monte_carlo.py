@@ -66,16 +66,11 @@ trial's measured section, not computed once per placement and reused.  Reuse wou
 right — the line-centre bias depends on the geometry and the calibration, hardly on the noise
 draw — but each drawn calibration has its own twin (its own camera and mirrors), and a twin
 made from the noise-free section would not be the correction a user gets, whose twin is
-shaped and exposed from the noisy image.  And the cost fits (measured 2026-12-04 on the two
-cores while other work shared them): a trial with a drawn calibration, its mastered
-compensation and the measurement 0.45–0.67 s, the twin's correction of one section
-0.75–1.17 s more; a default trial corrects two sections (its own and the master's reference
-shot) and, with ``steps``, measures two more configurations: 100 such trials took 4 min on two
-worker processes (STUDIES.md, "Monte Carlo uncertainty").  The configurations of one draw
-share its drawn calibration, its reference shots (imaged and measured once, not once per
-configuration) and one inverse plan (they differ only by compensation, applied to the
-measured points afterwards), and one twin (one loaded scene, moved to each surface): a
-default trial costs 0.95–1.00 s of CPU (BENCHMARKS.md), half of it the twin's two corrections.
+shaped and exposed from the noisy image.  The configurations of one draw share its drawn
+calibration, its reference shots (imaged and measured once), one inverse plan (they differ
+only by compensation, applied to the measured points afterwards) and one twin (one loaded
+scene, moved to each surface): a default trial costs 0.95–1.00 s of CPU (BENCHMARKS.md), half
+of it the twin's two corrections (its own section and the master's reference shot).
 The twin's samples are keyed to the pixel and the seed
 (:class:`~lts360.simulator.keyed_sampler.KeyedSampler`): with one seed for every trial each
 twin would draw nearly the same render noise, so a trial whose every input varies renders its
