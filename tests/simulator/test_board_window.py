@@ -39,15 +39,6 @@ def shots(rig):
                                                 seed=0)}
 
 
-@pytest.fixture(scope="module")
-def variant():
-    mi = pytest.importorskip("mitsuba", reason="rendering needs Mitsuba 3 (installed by scripts/install.sh)")
-    if "llvm_ad_mono" not in mi.variants():
-        pytest.skip("llvm_ad_mono not available")
-    mi.set_variant("llvm_ad_mono")
-    return "llvm_ad_mono"
-
-
 def _mask(windows, shape):
     m = np.zeros(shape, dtype=bool)
     for x, y, w, h in windows:

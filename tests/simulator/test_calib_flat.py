@@ -30,15 +30,6 @@ def board():
     return next(s.board for s in shots if s.kind == "camera")
 
 
-@pytest.fixture(scope="module")
-def variant():
-    mi = pytest.importorskip("mitsuba", reason="rendering needs Mitsuba 3 (installed by scripts/install.sh)")
-    if "llvm_ad_mono" not in mi.variants():
-        pytest.skip("llvm_ad_mono not available")
-    mi.set_variant("llvm_ad_mono")
-    return "llvm_ad_mono"
-
-
 def _mask(px, shape):
     m = np.zeros(shape, bool)
     m[px[:, 1], px[:, 0]] = True

@@ -12,13 +12,10 @@ from lts360.simulator.keyed_sampler import lattice_multiplier
 
 
 @pytest.fixture(scope="module")
-def mi():
-    mi = pytest.importorskip("mitsuba", reason="rendering needs Mitsuba 3 (installed by scripts/install.sh)")
-    if "llvm_ad_mono" not in mi.variants():
-        pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
-    if mi.variant() is None:
-        mi.set_variant("llvm_ad_mono")
-    return mi
+def mi(variant):
+    import mitsuba
+
+    return mitsuba
 
 
 @pytest.mark.parametrize("n", [1, 2, 3, 16, 35, 64, 100, 256, 1024])

@@ -347,6 +347,16 @@ def _scene_shapes(spec) -> list[tuple[np.ndarray, np.ndarray]]:
     return shapes
 
 
+def _support_inputs(spec, scale: float, margin_px: float):
+    """What a geometric or hull support starts from: the rig, its camera, the (scaled) film
+    size, the scaled intrinsics and the scene's shapes; a negative margin refused."""
+    if not margin_px >= 0:
+        raise ValueError(f"margin_px must be >= 0, got {margin_px!r}")
+    cam = spec.rig.camera
+    return (spec.rig, cam, film_size(cam, scale), scale_intrinsics(cam.K, scale),
+            _scene_shapes(spec))
+
+
 def geometric_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_lens: bool = True,
                       margin_px: float = MARGIN_PX) -> PixelSupport:
     """The pixels that can hold direct laser light in ``spec`` (module docstring), from geometry.
@@ -359,12 +369,7 @@ def geometric_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_le
     margin_px : float, >= 0
         Added to each image point's blur radius.
     """
-    if not margin_px >= 0:
-        raise ValueError(f"margin_px must be >= 0, got {margin_px!r}")
-    rig, cam = spec.rig, spec.rig.camera
-    w, h = film_size(cam, scale)
-    K = scale_intrinsics(cam.K, scale)
-    shapes = _scene_shapes(spec)
+    rig, cam, (w, h), K, shapes = _support_inputs(spec, scale, margin_px)
     mask = np.zeros((h, w), bool)
     tris = slab_triangles(rig, shapes, max_bounces=max_bounces)
     if len(tris) == 0:
@@ -501,12 +506,7 @@ def hull_support(spec, *, scale: float = 1.0, max_bounces: int = 2, thin_lens: b
     """
     import cv2
 
-    if not margin_px >= 0:
-        raise ValueError(f"margin_px must be >= 0, got {margin_px!r}")
-    rig, cam = spec.rig, spec.rig.camera
-    w, h = film_size(cam, scale)
-    K = scale_intrinsics(cam.K, scale)
-    shapes = _scene_shapes(spec)
+    rig, cam, (w, h), K, shapes = _support_inputs(spec, scale, margin_px)
     mask = np.zeros((h, w), np.uint8)
     if not shapes:
         return PixelSupport(mask=mask.astype(bool), method="hull", margin_px=float(margin_px))
