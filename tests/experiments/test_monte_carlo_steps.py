@@ -21,6 +21,9 @@ def test_the_monte_carlo_defaults_are_master_and_twin():
     parse = build_parser().parse_args
     a = parse(["study", "monte-carlo", "--out", "s"])
     assert a.master is None and a.bias_model == "twin" and a.steps  # None: on unless --no-master
+    assert a.twin_per == "trial" and sig["twin_per"].default == "trial"
+    assert parse(["study", "monte-carlo", "--out", "s", "--twin-per", "placement"]).twin_per \
+        == "placement"
     a = parse(["study", "monte-carlo", "--out", "s", "--no-master", "--bias-model", "none",
                "--no-steps"])
     assert a.master is False and a.bias_model == "none" and not a.steps
@@ -130,3 +133,81 @@ def test_a_trials_configurations_share_one_plan_and_measure_as_with_their_own(
     other = dataclasses.replace(comp, K=comp.K * np.array([[1.001], [1.0], [1.0]]))
     p = _plan(other, grid, memo)
     assert p.cal is other and memo[("plan", id(grid))].cal is other  # made anew for it
+
+
+def test_a_draws_image_is_sampled_once_and_each_compensation_applied_as_measured(
+        tmp_path, truth_calibration):
+    """The configurations of a draw read the same image: it is sampled once (its raw peaks)
+    and each calibration's compensation applied afterwards (``recompensated``), bit for bit
+    the measurement ``inverse_triangulate`` makes with that calibration."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from lts360.experiments.mc_measure import measure
+    from lts360.experiments.monte_carlo import (
+        _grid,
+        _placement,
+        _render_placements,
+        _uncompensated,
+    )
+    from lts360.recon.triangulation.inverse import inverse_triangulate, recompensated
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.frame import sensor_image
+
+    renders = _render_placements(tmp_path, 1, rig="paper", seed=3, spp=4, say=lambda *_: None)
+    Y, L, _ = _placement(str(renders / "placement_00"))
+    image, _, _ = sensor_image(load_rig("paper"),
+                               SimpleNamespace(radiance_W_m2_sr=Y, laser_W_m2_sr=L),
+                               noise="realistic", seed=5)
+    base = _uncompensated(str(truth_calibration))
+    names = base.mirror_names
+    comp = dataclasses.replace(base, view_offsets_mm={n: np.array([0.01, -0.02]) for n in names},
+                               view_radial_offsets_mm={n: 0.003 for n in names},
+                               view_scales={n: 1.0004 for n in names})
+    grid, memo = _grid(2.0), {}
+    for cal in (base, comp, base):
+        flag = bool(cal.view_offsets_mm)
+        got = measure(image, cal, grid, "none", memo)[0]
+        own = inverse_triangulate(image, cal, grid, compensate=flag)
+        assert got.compensated is flag
+        for n, v in own.views.items():
+            assert np.array_equal(got.views[n].r_mm, v.r_mm, equal_nan=True)
+            assert np.array_equal(got.views[n].r_raw_mm, v.r_raw_mm, equal_nan=True)
+            assert np.array_equal(got.views[n].offset_mm, v.offset_mm)
+    assert sum(k[0] == "raw" for k in memo) == 1  # one sampling of the image for all three
+    moved = recompensated(own, comp)
+    assert not np.array_equal(moved.views[names[0]].r_mm, own.views[names[0]].r_mm,
+                              equal_nan=True)
+
+
+def test_the_frozen_twin_is_the_twin_of_the_noise_free_placement(tmp_path, truth_calibration):
+    """``twin_per="placement"``: each placement's twin correction made once, from its
+    noise-free image and the nominal calibration.  A draw that is that very image (only the
+    placement varies) measures as with its own twin; a noisy draw gets the same correction
+    subtracted (its mean over the draw's points moves y by about minus it), and the
+    configurations without the twin are those of the per-trial twin, value for value."""
+    from lts360.experiments.monte_carlo import _render_placements, mc_trial
+    from lts360.experiments.runner import Trial
+
+    renders = _render_placements(tmp_path, 1, rig="paper", seed=3, spp=4, say=lambda *_: None)
+    base = {"calibration": str(truth_calibration), "renders": str(renders), "placements": 1,
+            "rig": "paper", "theta_step_deg": 2.0, "vary": "placement", "master": True,
+            "bias_model": "twin", "steps": True}
+    own = mc_trial(Trial(0, base, 4)).values
+    frozen = mc_trial(Trial(0, dict(base, twin_per="placement"), 4)).values
+    for key in ("y_um", "twin_bias_um", "y_no_twin_um", "y_c44_um", "y_c44_master_um"):
+        assert float(frozen[key]) == pytest.approx(float(own[key]), abs=1e-6), key
+    noisy = dict(base, vary="sensor_noise")
+    a = mc_trial(Trial(0, dict(noisy, twin_per="placement"), 8)).values
+    b = mc_trial(Trial(0, dict(noisy, twin_per="placement"), 9)).values
+    for v in (a, b):
+        moved = float(v["y_um"]) - float(v["y_no_twin_um"])
+        b_um = float(v["twin_bias_um"])
+        assert abs(b_um) > 1.0 and moved == pytest.approx(-b_um, abs=0.3 * abs(b_um))
+        # the same correction; its mean differs only by which points the draw found
+        assert b_um == pytest.approx(float(own["twin_bias_um"]), abs=0.3)
+    assert float(a["y_um"]) != float(b["y_um"])
+    trial = mc_trial(Trial(0, noisy, 8)).values
+    assert float(trial["y_c44_um"]) == float(a["y_c44_um"])  # no twin in it: the same
+    with pytest.raises(ValueError, match="twin_per"):
+        mc_trial(Trial(0, dict(base, twin_per="scan"), 4))

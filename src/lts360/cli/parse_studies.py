@@ -122,6 +122,12 @@ def _add_monte_carlo(studies) -> None:
     q.add_argument("--compensation-shots", type=int, default=1, metavar="K",
                    help="images of the reference placement each §4.4 compensation is fitted "
                    "to (default 1, as the paper)")
+    q.add_argument("--twin-per", choices=("trial", "placement"), default="trial",
+                   help="trial (default): each draw's twin rendered from its own section and "
+                   "calibration, as a user's measurement; placement: each placement's twin "
+                   "correction computed once (noise-free, nominal calibration) and reused — "
+                   "about 3x faster a trial, without the correction's own variation with the "
+                   "draw (BENCHMARKS.md)")
     q.add_argument("--placement-mm", type=float, default=0.3, metavar="R",
                    help="rendered placements drawn uniformly in a disc of radius R mm about the "
                    "axis (default 0.3); results are also reported against the distance from it")

@@ -95,6 +95,8 @@ def cmd_study_monte_carlo(args) -> int:
     _check_placement(args.placement_mm)
     if args.master and args.no_compensate:
         raise UsageError("--master: the mastering is a compensation; drop --no-compensate")
+    if args.twin_per != "trial" and args.bias_model != "twin":
+        raise UsageError("--twin-per: there is no twin with --bias-model none")
     master = args.master is not False and not args.no_compensate
     _optional_file(args.calibration, "--calibration")
     _study_rig(args.rig)
@@ -108,6 +110,7 @@ def cmd_study_monte_carlo(args) -> int:
                                     compensate=not args.no_compensate,
                                     compensation_shots=args.compensation_shots,
                                     master=master, bias_model=args.bias_model,
+                                    twin_per=args.twin_per,
                                     steps=args.steps, adaptive=args.adaptive,
                                     batch=args.batch, n_dig=args.digits,
                                     sensitivity_trials=args.sensitivity_trials,

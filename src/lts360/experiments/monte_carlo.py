@@ -112,6 +112,7 @@ from lts360.experiments.gauge_study import (
     _step_key,
     gauge_placements,
 )
+from lts360.experiments.mc_measure import TWIN_PER, _plan, _twin, apply_bias, measure
 from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study, study_pool
 from lts360.folders import is_frame, read_frame_meta
 
@@ -216,7 +217,7 @@ def _calibration(path: str):
 def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
                 noise_seed: int | None = None, shots: int = 1,
                 placement_mm: float = DEFAULT_PLACEMENT_MM, master: bool = False,
-                bias_model: str = "none", memo: dict | None = None):
+                bias_model: str = "none", memo: dict | None = None, frozen: str | None = None):
     """``cal`` with the §4.4 view offsets measured with it on the reference placement
     (``placement_00``), whatever offsets ``cal`` held.  The reference image is noise-free, or
     with ``noise_seed`` has realistic sensor noise and a speckle pattern drawn from it; then
@@ -229,7 +230,9 @@ def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
 
     ``memo``: a dict shared by the calls of one trial, all with the same ``cal``: the reference
     shots are imaged and measured once for the configurations a trial compares (the same
-    images, the same measurements), not once per configuration."""
+    images, the same measurements), not once per configuration.  ``frozen`` (the calibration
+    file's path): the shots' twin correction is the reference placement's frozen one
+    (:func:`~lts360.experiments.mc_measure.frozen_reference_bias`)."""
     from lts360.recon.calibration.compensation import joint_view_offsets
 
     key = ("shots", renders, rig_name, float(theta_step_deg), noise_seed, int(shots),
@@ -248,8 +251,15 @@ def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
             from lts360.twin import twin_corrected_raw
 
             grid = _grid(theta_step_deg, placement_mm)
-            twin, plan = _twin(cal, memo), _plan(cal, grid, memo)
-            results = [twin_corrected_raw(r, cal, grid, twin, plan=plan) for r in results]
+            if frozen is not None:  # the calibration file's path: the frozen correction's
+                from lts360.experiments.mc_measure import frozen_reference_bias
+
+                bias = frozen_reference_bias(frozen, renders, rig_name, float(theta_step_deg),
+                                             float(placement_mm))
+                results = [apply_bias(r, bias, raw=True)[0] for r in results]
+            else:
+                twin, plan = _twin(cal, memo), _plan(cal, grid, memo)
+                results = [twin_corrected_raw(r, cal, grid, twin, plan=plan) for r in results]
         fit = master_fit(results, GAUGE_DIAMETER_MM)
         return dataclasses.replace(cal, view_offsets_mm=fit.offsets_mm,
                                    view_radial_offsets_mm=fit.radial_offset_mm,
@@ -283,61 +293,6 @@ def _reference_shots(cal, renders: str, rig_name: str, theta_step_deg: float,
         grid = _grid(theta_step_deg, placement_mm)
         results.append(inverse_triangulate(ref, cal, grid, plan=_plan(cal, grid, memo)))
     return cal, results
-
-
-#: The fields of a calibration an inverse-triangulation plan does not read: the §4.4 offsets
-#: and the mastering (they move the measured points afterwards), the uncertainties, the optics.
-_NOT_PLANNED = ("view_offsets_mm", "view_radial_offsets_mm", "view_scales", "master",
-                "uncertainty", "optics")
-
-
-def _same(a, b) -> bool:
-    """Exact equality of calibration values (arrays bit for bit, containers and dataclasses
-    field by field)."""
-    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        return np.shape(a) == np.shape(b) and np.array_equal(a, b)
-    if dataclasses.is_dataclass(a) and type(a) is type(b):
-        return all(_same(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(a))
-    if isinstance(a, (tuple, list)) and isinstance(b, (tuple, list)):
-        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
-    if isinstance(a, dict) and isinstance(b, dict):
-        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
-    return type(a) is type(b) and a == b
-
-
-def _plan(cal, grid, memo: dict | None):
-    """:func:`~lts360.recon.triangulation.inverse.plan_inverse` for ``cal`` and ``grid``, as
-    ``inverse_triangulate`` makes it by default; with ``memo``, made once for the
-    calibrations of one trial whose geometry is the same, value for value (a drawn calibration
-    and its compensated forms: only their offsets and mastering differ), and handed to each."""
-    from lts360.recon.triangulation.inverse import plan_inverse
-
-    base = memo.get(("plan", id(grid))) if memo is not None else None
-    if base is None or base.grid is not grid or not all(
-            _same(getattr(base.cal, f.name), getattr(cal, f.name))
-            for f in dataclasses.fields(cal) if f.name not in _NOT_PLANNED):
-        base = plan_inverse(cal, grid, precompute=False)
-        if memo is not None:
-            memo[("plan", id(grid))] = base
-    return base if base.cal is cal else dataclasses.replace(base, cal=cal)
-
-
-def _twin(cal, memo: dict | None = None):
-    """The twin of a measurement with ``cal`` (its optics: the rig ``cal`` records, refused in
-    one line without a record), as the plug-gauge study makes it: no input sensitivity.  With
-    ``memo`` one twin for the calibrations of a trial (its master's shots and its image: the
-    same drawn geometry), so that its scene is loaded once and moved to each surface; each
-    correction is its own section of the twin's log, rendered with its own seed."""
-    from lts360.twin import TwinCorrector
-    from lts360.twin.rig import twin_design
-
-    twin = memo.get("twin") if memo is not None else None
-    if twin is None:
-        kw = {"seed": memo["twin_seed"]} if memo is not None and "twin_seed" in memo else {}
-        twin = TwinCorrector(cal, twin_design(cal), input_u=None, **kw)
-        if memo is not None:
-            memo["twin"] = twin
-    return twin
 
 
 @functools.lru_cache(maxsize=8)
@@ -402,7 +357,7 @@ def _nominal_radii(frame_dir: str, cal_path: str, renders: str, rig_name: str,
 
 
 def _trial_calibration(p: dict, vary: set, seeds, *, compensate: bool, master: bool,
-                       bias_model: str, memo: dict | None = None):
+                       bias_model: str, memo: dict | None = None, frozen: str | None = None):
     """The calibration a trial measures with: drawn or nominal, compensated as configured.
 
     ``memo``: a dict the calls of one trial share (the same ``p``, ``vary``, ``seeds``): the
@@ -429,7 +384,7 @@ def _trial_calibration(p: dict, vary: set, seeds, *, compensate: bool, master: b
                            noise_seed=int(seeds[4]) if "compensation" in vary else None,
                            shots=int(p.get("compensation_shots", 1)), placement_mm=pl_mm,
                            master=master, bias_model=bias_model if master else "none",
-                           memo=memo)
+                           memo=memo, frozen=frozen)
     return _nominal_calibration(p["calibration"], p["renders"], p["rig"], step, pl_mm, master,
                                 bias_model if master else "none")  # the same procedure, once
 
@@ -449,25 +404,6 @@ def _radius_error_um(result, dT: float) -> tuple[float, float, int]:
     return float(y), float(r.std() * 1e3), int(len(pts))
 
 
-def _measure(image, cal, grid, bias_model: str, memo: dict | None = None):
-    """The section in ``image`` measured with ``cal`` (compensated if it holds offsets), and
-    with ``bias_model="twin"`` corrected by its twin; also the uncorrected measurement and the
-    mean bias the twin removed over the corrected points (µm; NaN without the twin)."""
-    from lts360.recon.triangulation.inverse import inverse_triangulate
-
-    comp = bool(cal.view_offsets_mm)
-    plain = inverse_triangulate(image, cal, grid, compensate=comp, plan=_plan(cal, grid, memo))
-    if bias_model == "none":
-        return plain, plain, np.nan
-    from lts360.twin import twin_corrected
-
-    twin = _twin(cal, memo)
-    fixed = twin_corrected(plain, cal, grid, twin, compensate=comp, plan=_plan(cal, grid, memo))
-    views = twin.log.sections[-1]["views"].values()
-    b = np.concatenate([v["bias_mm"] for v in views]) if views else np.zeros(0)
-    return fixed, plain, float(1e3 * b.mean()) if b.size else np.nan
-
-
 def _twin_seed(vary: set, seeds) -> int | None:
     """The twin's render seed of a trial whose every input varies (its render noise drawn
     too: a stream of its own from the trial's seeds); ``None`` (the twin's default seed) in a
@@ -480,7 +416,8 @@ def _twin_seed(vary: set, seeds) -> int | None:
 def mc_trial(trial: Trial) -> TrialOutput:
     """One Monte Carlo draw (see the module docstring); ``params['vary']`` names the inputs
     that vary (``all`` or one of :data:`INPUTS`).  ``params``: ``compensate``, ``master``,
-    ``bias_model`` (the configuration measured; defaults: §4.4 alone, as earlier studies) and
+    ``bias_model`` (the configuration measured; defaults: §4.4 alone, as earlier studies),
+    ``twin_per`` (:data:`~lts360.experiments.mc_measure.TWIN_PER`; default ``"trial"``) and
     ``steps`` (also each of :data:`MC_STEPS` on the same draw: ``y_<key>_um``)."""
     from types import SimpleNamespace
 
@@ -506,13 +443,19 @@ def mc_trial(trial: Trial) -> TrialOutput:
     bias_model = p.get("bias_model", "none")
     if bias_model not in ("none", "twin"):
         raise ValueError(f"bias_model must be none or twin, got {bias_model!r}")
+    twin_per = p.get("twin_per", "trial")
+    if twin_per not in TWIN_PER:
+        raise ValueError(f"twin_per must be one of {', '.join(TWIN_PER)}, got {twin_per!r}")
     grid = _grid(step, pl_mm)
     memo: dict = {}  # the draw's calibration and reference shots, shared by its steps
     if (twin_seed := _twin_seed(vary, seeds)) is not None:
         memo["twin_seed"] = twin_seed
+    frozen = ((frame_dir, p["calibration"], p["renders"], p["rig"], step, pl_mm)
+              if twin_per == "placement" else None)
+    cal_kw = dict(memo=memo, frozen=p["calibration"] if frozen else None)
     cal = _trial_calibration(p, vary, seeds, compensate=compensate, master=master,
-                             bias_model=bias_model, memo=memo)
-    out, plain, twin_bias = _measure(image, cal, grid, bias_model, memo)
+                             bias_model=bias_model, **cal_kw)
+    out, plain, twin_bias = measure(image, cal, grid, bias_model, memo, frozen)
     offset = _offset_mm(frame_dir)
     dT = float(np.random.default_rng(seeds[3]).uniform(-DELTA_T_K, DELTA_T_K)) \
         if "temperature" in vary else 0.0
@@ -534,9 +477,9 @@ def mc_trial(trial: Trial) -> TrialOutput:
                 values[f"y_{key}_um"] = y
                 continue
             c = _trial_calibration(p, vary, seeds, compensate=comp, master=mast, bias_model=bias,
-                                   memo=memo)
-            values[f"y_{key}_um"] = _radius_error_um(_measure(image, c, grid, bias, memo)[0],
-                                                     dT)[0]
+                                   **cal_kw)
+            values[f"y_{key}_um"] = _radius_error_um(
+                measure(image, c, grid, bias, memo, frozen)[0], dT)[0]
     return TrialOutput(values=values)
 
 
@@ -616,7 +559,8 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
                           dask_address: str | None = None, compensate: bool = True,
                           compensation_shots: int = 1, master: bool = True,
                           bias_model: str = "twin", steps: bool = True,
-                          placement_mm: float = DEFAULT_PLACEMENT_MM, say=print) -> dict:
+                          placement_mm: float = DEFAULT_PLACEMENT_MM, twin_per: str = "trial",
+                          say=print) -> dict:
     """Run the study (see the module docstring); returns the summary written to summary.json.
 
     ``placement_mm``: the placements are drawn in a disc of that radius about the axis (their
@@ -633,9 +577,12 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
     ``"twin"`` (default): every trial's section corrected by its twin (and, mastered, the
     master's reference shots too).  ``steps``: each trial of the full Monte Carlo also
     measured with each of :data:`MC_STEPS` (the summary's ``steps``: the paper's method beside
-    ours on the same draws)."""
+    ours on the same draws).  ``twin_per``: the twin rendered for each ``"trial"`` (default),
+    or each ``"placement"``'s correction frozen (:mod:`lts360.experiments.mc_measure`)."""
     if bias_model not in ("none", "twin"):
         raise ValueError(f"bias_model must be none or twin, got {bias_model!r}")
+    if twin_per not in TWIN_PER:
+        raise ValueError(f"twin_per must be one of {', '.join(TWIN_PER)}, got {twin_per!r}")
     if not 1 <= int(compensation_shots) <= 100:
         raise ValueError(f"compensation_shots must be in [1, 100], got {compensation_shots}")
     out = Path(out_dir)
@@ -658,6 +605,8 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
         base["master"] = True
     if bias_model == "twin":
         base["bias_model"] = "twin"
+        if twin_per != "trial":
+            base["twin_per"] = twin_per
     if workers is None and dask_address is None:
         workers = 2
     with study_pool(workers, dask_address) as pool:  # one pool for every batch of the study
@@ -680,6 +629,7 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
     summary["speckle_point_std_um"] = float(np.nanmean(sp["speckle_point_std_um"].values))
     sp.close()
     summary["placement_mm"] = float(placement_mm)
+    summary["twin_per"] = twin_per if bias_model == "twin" else None
     summary["by_offset"] = _by_offset(sorted((out / "mc").glob("batch_*/results.nc")))
     summary["steps"] = _steps(sorted((out / "mc").glob("batch_*/results.nc")))
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
@@ -770,6 +720,9 @@ def format_mc(s: dict) -> str:
              f"u(y) = {s['u_um']:.2f} µm, 95 % interval [{s['interval95_um'][0]:+.2f}, "
              f"{s['interval95_um'][1]:+.2f}] µm",
              f"GUM budget (one input at a time, √Σu_i²): u_c = {s['gum_u_um']:.2f} µm"]
+    if s.get("twin_per") == "placement":
+        lines.insert(1, "twin: each placement's correction frozen (noise-free, nominal "
+                        "calibration): its variation with the draw is not in u(y)")
     for name in s["ranking"]:
         b = s["budget"][name]
         lines.append(f"  {name:14s} u_i = {b['u_um']:7.2f} µm  (mean {b['mean_um']:+.2f}, M = {b['M']})")

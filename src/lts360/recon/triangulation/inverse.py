@@ -26,7 +26,7 @@ This module imports no ground truth: it runs on real images and real calibration
 from __future__ import annotations
 
 import weakref
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Mapping
 
 import numpy as np
@@ -50,7 +50,7 @@ from lts360.recon.view_points import raw_view_points
 
 __all__ = ["ViewPlan", "InversePlan", "ViewResult", "FusedCloud", "InverseResult",
            "plan_inverse", "plan_pixels", "project_grid", "sample_profiles", "assemble_view", "compensation_of",
-           "inverse_triangulate", "estimate_view_offsets", "DEFAULT_ACCEPT",]
+           "inverse_triangulate", "recompensated", "estimate_view_offsets", "DEFAULT_ACCEPT",]
 
 #: Qualities whose radius is kept: a saturated line still has a usable centre; a profile with
 #: a second comparable peak is ambiguous and dropped.
@@ -600,6 +600,29 @@ def inverse_triangulate(image, cal: Calibration, grid: CylGrid, *, views=None, w
                                       **compensation_of(cal, name, compensate))
     return InverseResult(grid=grid, views=results, peak=peak, threshold=thr, saturation=sat,
                          compensated=bool(compensate), accept=tuple(Quality(q) for q in accept))
+
+
+def recompensated(result: InverseResult, cal: Calibration,
+                  compensate: bool = True) -> InverseResult:
+    """``result`` as :func:`inverse_triangulate` returns it for the same image and plan with
+    ``cal`` and ``compensate``, where ``cal`` differs from the measured one only by its
+    compensation (§4.4 offsets, mastering): the views' peaks are kept (their raw radii and
+    qualities), only the compensation is applied anew, value for value as
+    :func:`assemble_view` does.  For one image measured with several compensations of one
+    calibration (the configurations of a Monte Carlo draw) without sampling it again."""
+    keep_q = np.asarray([int(q) for q in result.accept], dtype=np.uint8)
+    views = {}
+    for name, v in result.views.items():
+        kw = compensation_of(cal, name, compensate)
+        r = np.where(np.isin(v.quality, keep_q), v.r_raw_mm, np.nan)
+        scale, radial = kw.get("scale", 1.0), kw.get("radial_offset_mm", 0.0)
+        if radial != 0.0 or scale != 1.0:
+            r = float(scale) * r + float(radial)
+        offset = np.asarray(kw.get("offset_mm", (0.0, 0.0)), dtype=float).reshape(2)
+        views[name] = replace(v, r_mm=_shift_on_rays(result.grid.theta_rad, r, offset,
+                                                      result.grid.is_full_turn),
+                              offset_mm=offset)
+    return replace(result, views=views, compensated=bool(compensate))
 
 
 def estimate_view_offsets(result: InverseResult, *, reference: str = DIRECT,

@@ -1,0 +1,212 @@
+"""How a Monte Carlo trial measures its image: one inverse plan and one sampling of the image
+for the configurations of a draw, and the twin's correction, rendered for the trial or
+frozen per placement.
+
+The twin's correction of a section is its line-centre bias: the twin image of the measured
+section, rendered noise-free and measured as the image was, minus the section itself
+(:class:`lts360.twin.TwinCorrector`).  ``twin_per="trial"`` renders it for every trial, from
+the trial's noisy section, with the trial's drawn calibration — what a user's measurement
+does, and about 0.6 s of CPU a trial (two corrections: the image and the master's reference
+shot).  ``twin_per="placement"`` computes each placement's correction once per process,
+from its noise-free image measured with the nominal calibration, and subtracts it from every
+trial of that placement (per view and ray of the grid; a point the frozen correction does not
+cover stays uncorrected, as the twin leaves one).  What that leaves out is how the
+correction moves with the trial's draw — its calibration, noise and speckle — which the
+paired benchmark measures (``benchmarks/bench_mc_twin.py``, BENCHMARKS.md): a small fraction
+of u(y), and a trial costs a third.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import numpy as np
+
+__all__ = ["TWIN_PER", "frozen_image_bias", "frozen_reference_bias", "apply_bias"]
+
+#: Where a Monte Carlo trial's twin correction comes from (module docstring).
+TWIN_PER = ("trial", "placement")
+
+#: The fields of a calibration an inverse-triangulation plan does not read: the §4.4 offsets
+#: and the mastering (they move the measured points afterwards), the uncertainties, the optics.
+_NOT_PLANNED = ("view_offsets_mm", "view_radial_offsets_mm", "view_scales", "master",
+                "uncertainty", "optics")
+
+
+def _same(a, b) -> bool:
+    """Exact equality of calibration values (arrays bit for bit, containers and dataclasses
+    field by field)."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return np.shape(a) == np.shape(b) and np.array_equal(a, b)
+    if dataclasses.is_dataclass(a) and type(a) is type(b):
+        return all(_same(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(a))
+    if isinstance(a, (tuple, list)) and isinstance(b, (tuple, list)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    return type(a) is type(b) and a == b
+
+
+def _plan(cal, grid, memo: dict | None):
+    """:func:`~lts360.recon.triangulation.inverse.plan_inverse` for ``cal`` and ``grid``, as
+    ``inverse_triangulate`` makes it by default; with ``memo``, made once for the
+    calibrations of one trial whose geometry is the same, value for value (a drawn calibration
+    and its compensated forms: only their offsets and mastering differ), and handed to each."""
+    from lts360.recon.triangulation.inverse import plan_inverse
+
+    base = memo.get(("plan", id(grid))) if memo is not None else None
+    if base is None or base.grid is not grid or not all(
+            _same(getattr(base.cal, f.name), getattr(cal, f.name))
+            for f in dataclasses.fields(cal) if f.name not in _NOT_PLANNED):
+        base = plan_inverse(cal, grid, precompute=False)
+        if memo is not None:
+            memo[("plan", id(grid))] = base
+    return base if base.cal is cal else dataclasses.replace(base, cal=cal)
+
+
+def _twin(cal, memo: dict | None = None):
+    """The twin of a measurement with ``cal`` (its optics: the rig ``cal`` records, refused in
+    one line without a record), as the plug-gauge study makes it: no input sensitivity.  With
+    ``memo`` one twin for the calibrations of a trial (its master's shots and its image: the
+    same drawn geometry), so that its scene is loaded once and moved to each surface; each
+    correction is its own section of the twin's log, rendered with its own seed."""
+    from lts360.twin import TwinCorrector
+    from lts360.twin.rig import twin_design
+
+    twin = memo.get("twin") if memo is not None else None
+    if twin is None:
+        kw = {"seed": memo["twin_seed"]} if memo is not None and "twin_seed" in memo else {}
+        twin = TwinCorrector(cal, twin_design(cal), input_u=None, **kw)
+        if memo is not None:
+            memo["twin"] = twin
+    return twin
+
+
+def _raw(image, cal, grid, memo: dict | None):
+    """``image`` measured with ``cal`` without compensation; with ``memo`` sampled once for the
+    calibrations of a draw (the same plan: their compensations differ, applied afterwards)."""
+    from lts360.recon.triangulation.inverse import inverse_triangulate
+
+    key = ("raw", id(image), id(grid))
+    if memo is not None and key in memo and memo[key][0] is image:
+        return memo[key][1]
+    raw = inverse_triangulate(image, cal, grid, compensate=False, plan=_plan(cal, grid, memo))
+    if memo is not None:
+        memo[key] = (image, raw)  # the image held: its id is not reused while the memo lives
+    return raw
+
+
+def measure(image, cal, grid, bias_model: str, memo: dict | None = None,
+            frozen: tuple | None = None):
+    """The section in ``image`` measured with ``cal`` (compensated if it holds offsets), and
+    with ``bias_model="twin"`` corrected by its twin — rendered for this measurement, or with
+    ``frozen`` (the keys of :func:`frozen_image_bias` but ``master``) the placement's frozen
+    correction; also the uncorrected measurement and the mean bias the twin removed over the
+    corrected points (µm; NaN without the twin)."""
+    from lts360.recon.triangulation.inverse import recompensated
+
+    comp = bool(cal.view_offsets_mm)
+    raw = _raw(image, cal, grid, memo)
+    plain = recompensated(raw, cal, comp) if comp else raw
+    if bias_model == "none":
+        return plain, plain, np.nan
+    if frozen is not None:
+        fixed, b = apply_bias(plain, frozen_image_bias(*frozen, master=bool(cal.master)))
+        return fixed, plain, b
+    from lts360.twin import twin_corrected
+
+    twin = _twin(cal, memo)
+    fixed = twin_corrected(plain, cal, grid, twin, compensate=comp, plan=_plan(cal, grid, memo))
+    views = twin.log.sections[-1]["views"].values()
+    b = np.concatenate([v["bias_mm"] for v in views]) if views else np.zeros(0)
+    return fixed, plain, float(1e3 * b.mean()) if b.size else np.nan
+
+
+# -- the frozen correction -----------------------------------------------------------------
+def _bias_of(result, entry) -> dict[str, np.ndarray]:
+    """Per view, the bias (mm) a twin's log ``entry`` removed from ``result`` on each ray of
+    the grid (NaN where it corrected nothing)."""
+    out = {}
+    for name, v in result.views.items():
+        b = np.full(np.shape(v.r_mm), np.nan)
+        rec = entry["views"].get(name)
+        if rec is not None and len(rec["theta_rad"]):
+            at = np.isin(np.asarray(v.theta_rad), rec["theta_rad"])
+            b[at] = rec["bias_mm"]
+        out[name] = b
+    return out
+
+
+def _noise_free_image(frame_dir: str, rig_name: str):
+    from types import SimpleNamespace
+
+    from lts360.experiments.monte_carlo import _placement
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.frame import sensor_image
+
+    Y, L, _ = _placement(frame_dir)
+    img, _, _ = sensor_image(load_rig(rig_name), SimpleNamespace(radiance_W_m2_sr=Y,
+                                                                  laser_W_m2_sr=L), noise="none")
+    return img
+
+
+def _frozen(image, cal, grid, compensate: bool) -> dict[str, np.ndarray]:
+    from lts360.recon.triangulation.inverse import inverse_triangulate
+    from lts360.twin import twin_corrected
+
+    plain = inverse_triangulate(image, cal, grid, compensate=compensate)
+    twin = _twin(cal)
+    twin_corrected(plain, cal, grid, twin, compensate=compensate)
+    return _bias_of(plain, twin.log.sections[-1])
+
+
+@functools.lru_cache(maxsize=32)
+def frozen_image_bias(frame_dir: str, cal_path: str, renders: str, rig_name: str,
+                      theta_step_deg: float, placement_mm: float, *,
+                      master: bool) -> dict[str, np.ndarray]:
+    """The twin's correction of a placement's section (per view, mm on each ray of the grid;
+    NaN where none): its noise-free image measured with the nominal calibration compensated
+    (and with ``master`` mastered) at the reference placement, as the trials measure theirs;
+    once per process."""
+    from lts360.experiments.monte_carlo import _grid, _nominal_calibration
+
+    cal = _nominal_calibration(cal_path, renders, rig_name, theta_step_deg, placement_mm,
+                               master, "twin" if master else "none")
+    return _frozen(_noise_free_image(frame_dir, rig_name), cal,
+                   _grid(theta_step_deg, placement_mm), True)
+
+
+@functools.lru_cache(maxsize=8)
+def frozen_reference_bias(cal_path: str, renders: str, rig_name: str, theta_step_deg: float,
+                          placement_mm: float) -> dict[str, np.ndarray]:
+    """The twin's correction of the reference placement's shot measured without compensation
+    (the master's shots, :func:`~lts360.twin.twin_corrected_raw`), frozen as
+    :func:`frozen_image_bias`."""
+    from pathlib import Path
+
+    from lts360.experiments.monte_carlo import _grid, _uncompensated
+
+    return _frozen(_noise_free_image(str(Path(renders) / "placement_00"), rig_name),
+                   _uncompensated(cal_path), _grid(theta_step_deg, placement_mm), False)
+
+
+def apply_bias(result, bias: dict, *, raw: bool = False):
+    """``result`` with ``bias`` (per view, mm on each ray) subtracted from its valid points
+    where the bias is known, and the mean bias removed (µm; NaN if none); ``raw``: the
+    corrected radii also as ``r_raw_mm``, as :func:`~lts360.twin.twin_corrected_raw` returns
+    a master's shot."""
+    views, removed = {}, []
+    for name, v in result.views.items():
+        b = bias.get(name)
+        if b is None:
+            views[name] = v
+            continue
+        ok = v.valid & np.isfinite(b)
+        r = np.where(ok, v.r_mm - np.where(ok, b, 0.0), v.r_mm)
+        removed.append(b[ok])
+        kw = {"r_raw_mm": np.where(np.isfinite(r), r, v.r_raw_mm)} if raw else {}
+        views[name] = dataclasses.replace(v, r_mm=r, **kw)
+    b = np.concatenate(removed) if removed else np.zeros(0)
+    return (dataclasses.replace(result, views=views),
+            float(1e3 * b.mean()) if b.size else float("nan"))
