@@ -36,9 +36,10 @@ batches of ``batch`` trials until twice the standard deviations of the batch mea
 mean, the standard uncertainty and both ends of the 95 % coverage interval are all below the
 numerical tolerance δ (§7.9.2: δ = ½·10^l for u(y) written with ``n_dig`` significant digits).
 The coverage interval is the probabilistically symmetric one (§7.7).  JCGM 101 (and DESIGN.md)
-take batches of max(J, 10⁴) with J = ⌈100/(1−p)⌉; one trial here costs ~0.4 s (a reconstruction,
-not a formula), so a batch of 10⁴ would take about an hour on two cores — the default batch is
-100 trials (``--batch``), the stopping rule unchanged.
+take batches of max(J, 10⁴) with J = ⌈100/(1−p)⌉; one trial here costs ~0.9 s of CPU (two
+reconstructions and two twin renders, not a formula), so a batch of 10⁴ would take over an
+hour on two cores — the default batch is 100 trials (``--batch``), the stopping rule
+unchanged.
 
 The §4.4 compensation is part of the measurement procedure, so every trial measures with a
 compensated calibration, compensated the same way: the nominal calibration (the file given,
@@ -61,21 +62,28 @@ switchable:
   :func:`~lts360.experiments.gauge_study.measure_gauge_image`), and a mastered compensation's
   reference shots too (:func:`lts360.twin.twin_corrected_raw`, as ``lts360 compensate``).
 
-The twin is rendered anew for every trial, with that trial's calibration and from that
-trial's measured section, not computed once per placement and reused.  Reuse would be nearly
-right — the line-centre bias depends on the geometry and the calibration, hardly on the noise
-draw — but each drawn calibration has its own twin (its own camera and mirrors), and a twin
-made from the noise-free section would not be the correction a user gets, whose twin is
-shaped and exposed from the noisy image.  The configurations of one draw share its drawn
-calibration, its reference shots (imaged and measured once), one inverse plan (they differ
-only by compensation, applied to the measured points afterwards) and one twin (one loaded
-scene, moved to each surface): a default trial costs 0.95–1.00 s of CPU (BENCHMARKS.md), half
-of it the twin's two corrections (its own section and the master's reference shot).
-The twin's samples are keyed to the pixel and the seed
-(:class:`~lts360.simulator.keyed_sampler.KeyedSampler`): with one seed for every trial each
-twin would draw nearly the same render noise, so a trial whose every input varies renders its
-twin with a seed of its own (the twin's default seed in the one-at-a-time runs, whose inputs
-do not include it).
+The twin is rendered anew for every trial by default (``twin_per="trial"``), with that
+trial's calibration and from that trial's measured section: each drawn calibration has its
+own twin (its own camera and mirrors), and a user's twin is shaped and exposed from the noisy
+image.  The configurations of one draw share its drawn calibration, its reference shots
+(imaged and measured once), one inverse plan and one sampling of the image (they differ only
+by compensation, applied to the measured points afterwards:
+:func:`~lts360.recon.triangulation.inverse.recompensated`) and one twin (one loaded scene,
+moved to each surface); the twin's two corrections (its own section and the master's
+reference shot) are about two thirds of a trial's CPU (BENCHMARKS.md).  The twin's samples are
+keyed to the pixel and the seed (:class:`~lts360.simulator.keyed_sampler.KeyedSampler`):
+with one seed for every trial each twin would draw nearly the same render noise, so a trial
+whose every input varies renders its twin with a seed of its own (the twin's default seed in
+the one-at-a-time runs, whose inputs do not include it).
+
+``twin_per="placement"`` (``--twin-per placement``) computes each placement's correction once
+per process instead, from its noise-free image and the nominal calibration
+(:mod:`lts360.experiments.mc_measure`), and subtracts it in every trial: a third of the
+CPU a trial, but the correction's own variation with the draw (its calibration, the noisy
+section it is shaped from, its render noise) is left out of u(y).  On the same draws
+(``benchmarks/bench_mc_twin.py``) the two differ by 0.54 µm rms in y (at most 1.8 µm over 24
+draws) against a u(y) of 3.0 µm: for design sweeps and quick looks; the default for the
+uncertainty one states.
 
 With ``steps`` (default on) each trial of the full Monte Carlo also measures its image with
 the other configurations of :data:`MC_STEPS` on the same draw (the same image, drawn
