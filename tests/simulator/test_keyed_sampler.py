@@ -109,3 +109,39 @@ def test_a_keyed_render_of_a_pixel_is_the_same_in_any_pixel_list(mi):
     assert se < 0.01 * pm.mean()  # a test that could fail: the means known to 1 %
     with pytest.raises(ValueError, match="laser integrator"):
         render_pixels(spec, a[:3], seed=1, sampler="keyed", integrator="path", **kw)
+
+
+def test_a_keyed_render_compiles_one_kernel_for_every_seed(mi):
+    """The seed's hashed words are kernel data (``dr.opaque``), not literals: renders with
+    other seeds (every section of a scan's twin, every Monte Carlo draw) launch the kernel
+    the first seed compiled — the same kernels by Dr.Jit's kernel history."""
+    import drjit as dr
+
+    from lts360.scenes.objects import build_object
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.materials import material_to_bsdf
+    from lts360.simulator.render import prepare_scene, render_pixels
+    from lts360.simulator.scene import SceneSpec
+
+    rig = load_rig("paper")
+    obj = build_object("plug-gauge")
+    spec = SceneSpec(rig, (("object", obj.mesh_world(), material_to_bsdf(obj.material)),))
+    kw = dict(spp=16, scale=0.125, laser_on=True, sampler="keyed")
+    prepared = prepare_scene(spec, **kw)
+    px = np.argwhere(np.ones((128, 160), bool))[:, ::-1][::7]
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        hashes = []
+        for seed in (11, 12, 913):
+            dr.kernel_history_clear()
+            las = render_pixels(spec, px, seed=seed, prepared=prepared, **kw)[1]
+            hashes.append({k["hash"] for k in dr.kernel_history()
+                           if k.get("type") == dr.KernelType.JIT})
+            if seed == 11:
+                first = las
+            else:
+                assert not np.array_equal(first, las)
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    # the same kernels (by their hash: an on-disk cache hit would hide a new compilation)
+    assert hashes[0] and hashes[1] <= hashes[0] and hashes[2] <= hashes[0]

@@ -79,7 +79,9 @@ class KeyedSampler:
         import mitsuba as mi
 
         word = mi.sample_tea_32(self._seed, self._dim, _ROUNDS)[0]  # (seed, dimension)
-        shift = mi.sample_tea_float32(self._key, mi.UInt32(word), _ROUNDS)
+        # opaque: the seed's words are kernel data, not literals (a literal per seed would
+        # compile a new kernel for every seed: every section of a scan, every Monte Carlo draw)
+        shift = mi.sample_tea_float32(self._key, dr.opaque(mi.UInt32, int(word)), _ROUNDS)
         x = mi.Float((self._s * self._z) % self._n) * (1.0 / self._n) + shift  # s·z < 2^32
         self._dim += 1
         self._z = (self._z * self._a) % self._n
