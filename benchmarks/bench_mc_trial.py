@@ -3,7 +3,8 @@ calibration draw, inverse triangulation) per trial, for an estimate of a 1000-tr
 
 The trials are the study's main run as ``lts360 study monte-carlo`` makes them by default:
 every input varying, §4.4 + master + twin, and the other configurations of each draw
-(``steps``); ``--no-master``, ``--bias-model none`` and ``--no-steps`` as the study's options
+(``steps``); ``--no-master``, ``--bias-model none``, ``--no-steps`` and ``--twin-per`` as the
+study's options
 (the setup's own ``base.json`` is not changed by them).
 
 Set-up (``--setup DIR``): the study's placement renders and the true calibration, as
@@ -14,7 +15,7 @@ trials on ``c`` cores is ``1000 × median / c`` (the study's pool runs one trial
 
 Usage: python benchmarks/bench_mc_trial.py --setup DIR [--placements 2] [--trials 8]
        [--theta-step-deg 0.5] [--no-master] [--bias-model twin|none] [--no-steps]
-       [--json OUT]
+       [--twin-per trial|placement] [--json OUT]
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ def main(argv=None) -> None:
     ap.add_argument("--no-master", dest="master", action="store_false")
     ap.add_argument("--bias-model", choices=("twin", "none"), default="twin")
     ap.add_argument("--no-steps", dest="steps", action="store_false")
+    ap.add_argument("--twin-per", choices=("trial", "placement"), default="trial")
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
 
@@ -63,7 +65,8 @@ def main(argv=None) -> None:
         base["setup_s"] = time.perf_counter() - t0
         base_file.write_text(json.dumps(base, indent=2))
     params = {k: v for k, v in base.items() if k != "setup_s"}
-    params.update(master=args.master, steps=args.steps, bias_model=args.bias_model)
+    params.update(master=args.master, steps=args.steps, bias_model=args.bias_model,
+                  twin_per=args.twin_per)
     if args.bias_model == "twin":
         from lts360.recon.model import load_calibration
         from lts360.twin.rig import twin_design
@@ -84,7 +87,7 @@ def main(argv=None) -> None:
            "cpu_median_s": statistics.median(cpu[1:]),
            "estimate_1000_cpu_s": 1000 * statistics.median(cpu[1:]) / cores,
            "configuration": {"master": args.master, "bias_model": args.bias_model,
-                             "steps": args.steps},
+                             "steps": args.steps, "twin_per": args.twin_per},
            "cores": cores, "load_average": os.getloadavg(), "setup_s": base.get("setup_s")}
     text = json.dumps(out, indent=2)
     print(text)
