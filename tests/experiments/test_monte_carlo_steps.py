@@ -101,13 +101,8 @@ def test_a_trials_configurations_share_one_plan_and_measure_as_with_their_own(
     import dataclasses
     from types import SimpleNamespace
 
-    from lts360.experiments.monte_carlo import (
-        _grid,
-        _placement,
-        _plan,
-        _render_placements,
-        _uncompensated,
-    )
+    from lts360.experiments.mc_measure import _grid, _placement, _plan, _uncompensated
+    from lts360.experiments.monte_carlo import _render_placements
     from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import sensor_image
@@ -143,13 +138,8 @@ def test_a_draws_image_is_sampled_once_and_each_compensation_applied_as_measured
     import dataclasses
     from types import SimpleNamespace
 
-    from lts360.experiments.mc_measure import measure
-    from lts360.experiments.monte_carlo import (
-        _grid,
-        _placement,
-        _render_placements,
-        _uncompensated,
-    )
+    from lts360.experiments.mc_measure import _grid, _placement, _uncompensated, measure
+    from lts360.experiments.monte_carlo import _render_placements
     from lts360.recon.triangulation.inverse import inverse_triangulate, recompensated
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import sensor_image

@@ -102,7 +102,6 @@ triangulation (Dorsch, Häusler, Herrmann, Appl. Opt. 33(7) 1994) for the same o
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import json
 import math
@@ -120,7 +119,16 @@ from lts360.experiments.gauge_study import (
     _step_key,
     gauge_placements,
 )
-from lts360.experiments.mc_measure import TWIN_PER, _plan, _twin, apply_bias, measure
+from lts360.experiments.mc_measure import (
+    TWIN_PER,
+    _calibration,
+    _compensate,
+    _grid,
+    _nominal_calibration,
+    _placement,
+    _uncompensated,
+    measure,
+)
 from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study, study_pool
 from lts360.folders import is_frame, read_frame_meta
 
@@ -203,132 +211,6 @@ def speckle_point_prediction_um(rig, diameter_mm: float = 19.9987) -> dict:
                                                        speckle=sk),
                                gradient=False).speckle_rms_um[0])
             for sk in ("pixel", "dorsch")}
-
-
-@functools.lru_cache(maxsize=16)
-def _placement(frame_dir: str):
-    """Stored radiance + the frame's rig (read once per process)."""
-    from lts360.simulator.io import read_exr
-
-    ch = read_exr(Path(frame_dir) / "radiance.exr")
-    meta = read_frame_meta(frame_dir)
-    return ch["Y"], ch["laser"], meta
-
-
-@functools.lru_cache(maxsize=2)
-def _calibration(path: str):
-    from lts360.recon.model import load_calibration
-
-    return load_calibration(path)
-
-
-def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
-                noise_seed: int | None = None, shots: int = 1,
-                placement_mm: float = DEFAULT_PLACEMENT_MM, master: bool = False,
-                bias_model: str = "none", memo: dict | None = None, frozen: str | None = None):
-    """``cal`` with the §4.4 view offsets measured with it on the reference placement
-    (``placement_00``), whatever offsets ``cal`` held.  The reference image is noise-free, or
-    with ``noise_seed`` has realistic sensor noise and a speckle pattern drawn from it; then
-    ``shots`` such images (the gauge turned between them: a new speckle pattern each) are
-    fitted jointly.  ``master``: the fit knows the gauge's diameter
-    (:func:`~lts360.recon.calibration.compensation.master_fit`: per view a radial offset
-    too); with ``bias_model="twin"`` its shots are corrected by their twin first
-    (:func:`~lts360.twin.twin_corrected_raw`, as the plug-gauge study and ``lts360
-    compensate`` do: the master then sets what the twin leaves).
-
-    ``memo``: a dict shared by the calls of one trial, all with the same ``cal``: the reference
-    shots are imaged and measured once for the configurations a trial compares (the same
-    images, the same measurements), not once per configuration.  ``frozen`` (the calibration
-    file's path): the shots' twin correction is the reference placement's frozen one
-    (:func:`~lts360.experiments.mc_measure.frozen_reference_bias`)."""
-    from lts360.recon.calibration.compensation import joint_view_offsets
-
-    key = ("shots", renders, rig_name, float(theta_step_deg), noise_seed, int(shots),
-           float(placement_mm))
-    if memo is not None and key in memo:
-        cal, results = memo[key]
-    else:
-        cal, results = _reference_shots(cal, renders, rig_name, theta_step_deg, noise_seed,
-                                        shots, placement_mm, memo)
-        if memo is not None:
-            memo[key] = (cal, results)
-    if master:
-        from lts360.recon.calibration.compensation import master_fit
-
-        if bias_model == "twin":
-            from lts360.twin import twin_corrected_raw
-
-            grid = _grid(theta_step_deg, placement_mm)
-            if frozen is not None:  # the calibration file's path: the frozen correction's
-                from lts360.experiments.mc_measure import frozen_reference_bias
-
-                bias = frozen_reference_bias(frozen, renders, rig_name, float(theta_step_deg),
-                                             float(placement_mm))
-                results = [apply_bias(r, bias, raw=True)[0] for r in results]
-            else:
-                twin, plan = _twin(cal, memo), _plan(cal, grid, memo)
-                results = [twin_corrected_raw(r, cal, grid, twin, plan=plan) for r in results]
-        fit = master_fit(results, GAUGE_DIAMETER_MM)
-        return dataclasses.replace(cal, view_offsets_mm=fit.offsets_mm,
-                                   view_radial_offsets_mm=fit.radial_offset_mm,
-                                   view_scales=fit.scale, master=fit.to_dict())
-    offsets = joint_view_offsets(results)
-    return dataclasses.replace(cal, view_offsets_mm=offsets)
-
-
-def _reference_shots(cal, renders: str, rig_name: str, theta_step_deg: float,
-                     noise_seed: int | None, shots: int, placement_mm: float,
-                     memo: dict | None = None):
-    """``cal`` without any compensation, and the reference placement's shots measured with
-    it (:func:`_compensate`'s images: noise-free, or ``shots`` noisy ones from ``noise_seed``)."""
-    from types import SimpleNamespace
-
-    from lts360.recon.triangulation.inverse import inverse_triangulate
-    from lts360.scenes.rig_io import load_rig
-    from lts360.simulator.frame import sensor_image
-
-    Y0, L0, _ = _placement(str(Path(renders) / "placement_00"))
-    noisy = noise_seed is not None
-    rig = load_rig(rig_name)
-    cal = dataclasses.replace(cal, view_offsets_mm={}, view_radial_offsets_mm={},
-                              view_scales={}, master={})
-    results = []
-    for j in range(int(shots) if noisy else 1):  # noise-free shots would all be the same
-        s = int(noise_seed) + 2 * j if noisy else 0
-        ref, _, _ = sensor_image(rig, SimpleNamespace(radiance_W_m2_sr=Y0, laser_W_m2_sr=L0),
-                                 noise="realistic" if noisy else "none", seed=s, speckle=noisy,
-                                 speckle_seed=s + 1 if noisy else None)
-        grid = _grid(theta_step_deg, placement_mm)
-        results.append(inverse_triangulate(ref, cal, grid, plan=_plan(cal, grid, memo)))
-    return cal, results
-
-
-@functools.lru_cache(maxsize=8)
-def _nominal_calibration(path: str, renders: str, rig_name: str, theta_step_deg: float,
-                         placement_mm: float = DEFAULT_PLACEMENT_MM, master: bool = False,
-                         bias_model: str = "none"):
-    """The file's calibration compensated at the reference placement (once per process)."""
-    return _compensate(_calibration(path), renders, rig_name, theta_step_deg,
-                       placement_mm=placement_mm, master=master,
-                       bias_model=bias_model if master else "none")
-
-
-def _uncompensated(path: str):
-    """The file's calibration without any compensation (§4.4 offsets, mastering)."""
-    return dataclasses.replace(_calibration(path), view_offsets_mm={}, view_radial_offsets_mm={},
-                               view_scales={}, master={})
-
-
-@functools.lru_cache(maxsize=8)
-def _grid(theta_step_deg: float, placement_mm: float = DEFAULT_PLACEMENT_MM):
-    """The fixed band about the gauge's radius: ±0.5 mm at the nominal placements, widened by
-    the placement radius beyond them."""
-    from lts360.recon.triangulation.grid import CylGrid
-
-    r0 = GAUGE_DIAMETER_MM / 2.0
-    half = 0.5 + max(0.0, float(placement_mm) - DEFAULT_PLACEMENT_MM)
-    return CylGrid.from_ranges((r0 - half, r0 + half), theta_step_deg=theta_step_deg,
-                               r_step_mm=0.005)
 
 
 @functools.lru_cache(maxsize=64)
