@@ -251,7 +251,7 @@ def test_growing_the_drawn_pixels_equals_dilating_the_whole_canvas():
     """``_grow`` dilates only the drawn pixels' box: the same film mask as dilating the whole
     canvas, for shapes inside the film, across its border and at the canvas's corner, and
     none for an empty canvas."""
-    cv2 = pytest.importorskip("cv2")
+    cv2 = pytest.importorskip("cv2", reason="the dilation reference is OpenCV's")
     from lts360.simulator.board_window import _grow
 
     width, height, r = 90, 70, 6

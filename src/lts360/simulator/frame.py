@@ -216,11 +216,15 @@ def render_frame(spec: SceneSpec, *, spp: int, seed: int, scale: float = 1.0, ma
     if support in ("geometric", "hull"):
         # The scene is loaded (or its shapes moved) on a second thread while the geometry gives
         # the support here: both are mostly one core's work (the same scene as loaded here).
-        pending = _scene_thread().submit(_evaluated, load)
-        try:
-            sup = make() if scenes is None else scenes.support(spec, make, method=support, **geo)
-        finally:
-            prepared = pending.result()
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="lts360-scene") as pool:
+            pending = pool.submit(_evaluated, load)
+            try:
+                sup = (make() if scenes is None
+                       else scenes.support(spec, make, method=support, **geo))
+            finally:
+                prepared = pending.result()
     else:  # the pilot renders the prepared scene
         prepared = load()
         sup = make() if scenes is None else scenes.support(spec, make, method=support, **geo)
@@ -251,18 +255,6 @@ def render_frame(spec: SceneSpec, *, spp: int, seed: int, scale: float = 1.0, ma
                        spp=spp, seed=seed, seconds=time.perf_counter() - t0,
                        held_index=None if ambient or sup.method == "full" else index)
     return res, sup
-
-
-_SCENE_THREAD: list = []
-
-
-def _scene_thread():
-    """One worker thread of this process that loads scenes while the caller works."""
-    if not _SCENE_THREAD:
-        from concurrent.futures import ThreadPoolExecutor
-
-        _SCENE_THREAD.append(ThreadPoolExecutor(max_workers=1, thread_name_prefix="lts360-scene"))
-    return _SCENE_THREAD[0]
 
 
 def _evaluated(fn):
@@ -331,8 +323,9 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
         las_r = laser.reshape(-1)[rendered]
         on = rendered[las_r != 0]
         held = rendered[(flat[rendered] != 0) | (las_r != 0)]
+        lit_index = rendered[las_r > 0]
         lit = np.zeros(laser.shape, bool)
-        lit.flat[rendered[las_r > 0]] = True
+        lit.flat[lit_index] = True
     else:
         lit = laser > 0
         on = np.flatnonzero(laser != 0)
@@ -359,7 +352,7 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
         # The statistic over the laser-lit pixels only (the same values as a mask over the
         # whole frame, without converting the dark rest).
         lit_values = res.radiance_W_m2_sr[lit] if rendered is None else \
-            flat[rendered[laser.reshape(-1)[rendered] > 0]]    # the same values, in order
+            flat[lit_index]                                      # the same values, in order
         exposure_time_s = sensor_mod.auto_exposure(
             lit_values if lit_values.size else res.radiance_W_m2_sr, sens,
             wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
