@@ -60,6 +60,45 @@ def test_ray_radii_pick_the_crossing_nearest_the_hint():
     assert ray_radii(outer + 10.0, [np.pi])[0] != ray_radii(outer + 10.0, [np.pi])[0]  # NaN: missed
 
 
+def _ray_radii_every_pair(v, th, near=None):
+    """Reference: every ray against every edge (what ray_radii did before it paired them)."""
+    e = np.roll(v, -1, axis=0) - v
+    u = np.column_stack([np.cos(th), np.sin(th)])
+    uxe = u[:, :1] * e[None, :, 1] - u[:, 1:] * e[None, :, 0]
+    pxu = v[None, :, 0] * u[:, 1:] - v[None, :, 1] * u[:, :1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (v[:, 0] * e[:, 1] - v[:, 1] * e[:, 0])[None, :] / uxe
+        s = pxu / uxe
+    hit = (uxe != 0) & (s >= 0) & (s < 1) & (t > 0)
+    if near is None:
+        out = np.max(np.where(hit, t, -np.inf), axis=1)
+    else:
+        k = np.argmin(np.where(hit, np.abs(t - near[:, None]), np.inf), axis=1)
+        out = np.where(hit[np.arange(len(th)), k], t[np.arange(len(th)), k], np.nan)
+    return np.where(np.isfinite(out), out, np.nan)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(3, 120), star=st.booleans(),
+       shift=st.floats(0.0, 4.0), n_rays=st.integers(1, 300))
+def test_ray_radii_tests_every_edge_a_ray_can_cross(seed, n, star, shift, n_rays):
+    """Pairing each edge with the rays inside the angle it subtends finds exactly what testing
+    every ray against every edge finds, bit for bit: star-shaped profiles around or beside
+    the origin, self-intersecting polygons, rays through the vertices, at ±π and beyond, NaN."""
+    rng = np.random.default_rng(seed)
+    if star:
+        phi = np.sort(rng.uniform(-np.pi, np.pi, n))
+        v = rng.uniform(0.5, 3.0, n)[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])
+    else:
+        v = rng.normal(0.0, 2.0, (n, 2))
+    v = v + shift * rng.normal(size=2)
+    th = np.concatenate([rng.uniform(-7.0, 7.0, n_rays), np.arctan2(v[:, 1], v[:, 0]),
+                         [np.pi, -np.pi, np.nan]])
+    near = rng.uniform(0.0, 6.0, th.size)
+    for hint in (None, near):
+        np.testing.assert_array_equal(ray_radii(v, th, hint), _ray_radii_every_pair(v, th, hint))
+
+
 def test_profile_of_a_noisy_circle_is_the_circle():
     pts = _circle((1.5, -0.7), 10.0, n=20000, noise=0.02, seed=1)
     prof = section_profile(pts, smooth_deg=2.0)

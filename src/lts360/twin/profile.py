@@ -320,33 +320,81 @@ def loft_mesh(profile: SectionProfile, form: AxialForm | None = None, *,
     return trimesh.Trimesh(vertices=verts, faces=faces, process=False)
 
 
-def ray_radii(vertices_mm, theta_rad, near_mm=None, *, chunk: int = 512) -> np.ndarray:
+def ray_radii(vertices_mm, theta_rad, near_mm=None) -> np.ndarray:
     """Where the rays from the origin at angles ``theta_rad`` cross the closed polygon
     ``vertices_mm`` (n, 2): the distance along each ray, the crossing nearest ``near_mm``
-    (per ray; default: the farthest).  NaN for a ray that crosses nothing."""
+    (per ray; default: the farthest; a tie goes to the first edge).  NaN for a ray that
+    crosses nothing.
+
+    Each edge is tested only against the rays within the angle it subtends at the origin (a
+    wider one, or an edge through the origin, against every ray): O(rays + edges + crossings)
+    instead of every ray against every edge, with the same arithmetic on the pairs tested."""
     v = np.asarray(vertices_mm, float).reshape(-1, 2)
     e = np.roll(v, -1, axis=0) - v
     th = np.asarray(theta_rad, float).ravel()
-    near = None if near_mm is None else np.broadcast_to(np.asarray(near_mm, float), th.shape)
+    ray, edge = _ray_edge_pairs(v, th)
+    u = np.column_stack([np.cos(th), np.sin(th)])[ray]
+    ve, ee = v[edge], e[edge]
+    pxe = ve[:, 0] * ee[:, 1] - ve[:, 1] * ee[:, 0]
+    uxe = u[:, 0] * ee[:, 1] - u[:, 1] * ee[:, 0]
+    pxu = ve[:, 0] * u[:, 1] - ve[:, 1] * u[:, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = pxe / uxe
+        s = pxu / uxe
+    hit = (uxe != 0) & (s >= 0) & (s < 1) & (t > 0)
+    ray, edge, t = ray[hit], edge[hit], t[hit]
     out = np.full(th.size, np.nan)
-    pxe = v[:, 0] * e[:, 1] - v[:, 1] * e[:, 0]
-    for a in range(0, th.size, chunk):
-        u = np.column_stack([np.cos(th[a:a + chunk]), np.sin(th[a:a + chunk])])
-        uxe = u[:, :1] * e[None, :, 1] - u[:, 1:] * e[None, :, 0]
-        pxu = v[None, :, 0] * u[:, 1:] - v[None, :, 1] * u[:, :1]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = pxe[None, :] / uxe
-            s = pxu / uxe
-        hit = (uxe != 0) & (s >= 0) & (s < 1) & (t > 0)
-        t = np.where(hit, t, np.nan)
-        if near is None:
-            out[a:a + chunk] = np.nanmax(np.where(hit, t, -np.inf), axis=1)
-        else:
-            dist = np.abs(t - near[a:a + chunk, None])
-            k = np.argmin(np.where(hit, dist, np.inf), axis=1)
-            out[a:a + chunk] = t[np.arange(len(k)), k]
+    if near_mm is None:
+        best = np.full(th.size, -np.inf)
+        np.maximum.at(best, ray, t)
+        out = np.where(np.isfinite(best), best, np.nan)
+    elif ray.size:
+        near = np.broadcast_to(np.asarray(near_mm, float), th.shape)
+        order = np.lexsort((edge, np.abs(t - near[ray]), ray))
+        first = order[np.r_[True, ray[order][1:] != ray[order][:-1]]]
+        out[ray[first]] = t[first]
     out[~np.isfinite(out)] = np.nan
     return out
+
+
+def _ray_edge_pairs(v: np.ndarray, th: np.ndarray, *, pad_rad: float = 1e-9,
+                    wide_rad: float = 0.5 * np.pi) -> tuple[np.ndarray, np.ndarray]:
+    """(ray, edge) index pairs of :func:`ray_radii` to test: each edge ``v[i] → v[i+1]`` with
+    the rays whose angle lies within the angle the edge subtends at the origin (± ``pad_rad``);
+    an edge subtending more than ``wide_rad`` or touching the origin with every ray.  Rays
+    with a NaN angle pair with nothing (they cross nothing)."""
+    a0 = np.arctan2(v[:, 1], v[:, 0])
+    span = np.angle(np.exp(1j * (np.roll(a0, -1) - a0)))  # the subtended angle, (−π, π]
+    lo = a0 + np.minimum(span, 0.0) - pad_rad
+    hi = lo + np.abs(span) + 2.0 * pad_rad
+    odd = ~np.all(np.isfinite(v), axis=1) | np.all(v == 0.0, axis=1)  # at the origin, or NaN
+    wide = (np.abs(span) > wide_rad) | odd | np.roll(odd, -1) | ~np.isfinite(span)
+    tw = np.mod(th + np.pi, 2.0 * np.pi) - np.pi  # [−π, π); NaN stays NaN (sorted last)
+    order = np.argsort(tw, kind="stable")
+    ts = tw[order]
+    n_ok = int(np.count_nonzero(np.isfinite(ts)))
+    ts = ts[:n_ok]
+    rays, edges = [], []
+    # each narrow edge's interval, split where it wraps past ±π
+    narrow = np.flatnonzero(~wide)
+    lo_w = np.mod(lo[narrow] + np.pi, 2.0 * np.pi) - np.pi
+    hi_w = lo_w + (hi[narrow] - lo[narrow])
+    for start, stop in ((lo_w, np.minimum(hi_w, np.pi)), (lo_w - 2.0 * np.pi, hi_w - 2.0 * np.pi)):
+        i0 = np.searchsorted(ts, start, side="left")
+        i1 = np.searchsorted(ts, stop, side="right")
+        count = np.maximum(i1 - i0, 0)
+        total = int(count.sum())
+        if total:
+            edge = np.repeat(narrow, count)
+            offset = np.arange(total) - np.repeat(np.cumsum(count) - count, count)
+            rays.append(order[np.repeat(i0, count) + offset])
+            edges.append(edge)
+    for i in np.flatnonzero(wide):
+        rays.append(order[:n_ok])
+        edges.append(np.full(n_ok, i))
+    if not rays:
+        return np.zeros(0, np.intp), np.zeros(0, np.intp)
+    return np.concatenate(rays), np.concatenate(edges)
 
 
 #: Rays a shared curve's slope is taken over (median), and the steepest incidence of a ray on

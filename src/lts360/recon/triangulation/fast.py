@@ -145,7 +145,13 @@ def window_layout(uv: np.ndarray, image_shape, *, boundary: str = "edge"
     fx = np.where(inside, u - iu, np.nan).astype(np.float32)
     fy = np.where(inside, v - iv, np.nan).astype(np.float32)
     key = iv.astype(np.int64) * w + iu.astype(np.int64)
-    corner, window = np.unique(key, return_inverse=True)
+    # np.unique(key, return_inverse=True) without its sort: the keys are pixel indices, so a
+    # table over the image gives the same sorted corners and inverse in O(n + h·w).
+    used = np.zeros(h * w, bool)
+    used[key] = True
+    corner = np.flatnonzero(used)
+    rank = np.cumsum(used, dtype=np.int64) - 1
+    window = rank[key]
     ty = corner[:, None, None] // w + _TAPS[None, :, None]
     tx = corner[:, None, None] % w + _TAPS[None, None, :]
     if boundary == "edge":
