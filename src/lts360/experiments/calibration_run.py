@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +29,7 @@ from lts360.recon.calibration.from_images import (
 )
 from lts360.recon.model import Calibration, calibration_from_frame_truth, save_calibration
 
-__all__ = ["run_calibrate", "calibration_accuracy", "calibration_report", "plot_fig8",
+__all__ = ["run_calibrate", "render_calibration", "RenderedShots", "RenderStopped", "calibration_accuracy", "calibration_report", "plot_fig8",
            "format_report"]
 
 
@@ -159,12 +160,82 @@ def plot_fig8(result: RigCalibrationResult, images_dir: Path, path: Path) -> Non
     tmp.replace(path)
 
 
+@dataclass(frozen=True)
+class RenderedShots:
+    """What :func:`render_calibration` leaves for :func:`run_calibrate`: the folder of images,
+    the truth (never read by the calibration) and the camera shots' corners found while
+    rendering."""
+
+    images_dir: Path
+    truth: dict
+    early: "_EarlyCorners"
+
+
+class RenderStopped(Exception):
+    """:func:`render_calibration` was told to stop (its ``stop`` event was set)."""
+
+
+def render_calibration(out_dir, *, rig_name: str = "paper", noise: str = "none", seed: int = 0,
+                       spp: int = 64, n_camera: int = 30, n_mirror: int = 6, n_laser: int = 6,
+                       board=None, camera_board=None, thin_lens: bool = True,
+                       f_number: float | None = None, laser_in_mirror: bool = True,
+                       target_spp: int | None = None, say=print, bar: bool = True,
+                       stop=None) -> RenderedShots:
+    """Plan the board poses and render them into ``out_dir/images`` (the first half of
+    :func:`run_calibrate`, whose parameters these are), detecting the camera shots' corners
+    while the next shots render.  ``bar``: a progress bar on stderr; ``stop``: a
+    :class:`threading.Event` checked after each shot (set: :class:`RenderStopped`, the
+    partial folder left behind), for a caller that renders in the background."""
+    from lts360.scenes.calib_plan import plan_calibration
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.calib_render import render_calibration_images
+    from lts360.simulator.io import write_json
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    rig = load_rig(rig_name)
+    if f_number is not None:
+        from dataclasses import replace
+
+        rig = replace(rig, camera=replace(rig.camera, f_number=float(f_number)))
+    shots = plan_calibration(rig, board, camera_board=camera_board, n_camera=n_camera,
+                             n_mirror=n_mirror, n_laser=n_laser, seed=seed,
+                             laser_in_mirror=laser_in_mirror)
+    say(f"planned {len(shots)} board poses: {n_camera} camera, {n_mirror} per mirror, "
+        f"{n_laser} laser (each laser pose: board, laser on, laser off)")
+    tmp = out / ".images.partial"
+    shutil.rmtree(tmp, ignore_errors=True)
+    progress = _bar(len(shots), "rendering") if bar else _NullBar()
+    early = _EarlyCorners(shots)
+
+    def rendered_one(name):
+        progress.update(1)
+        early.add(name, tmp)
+        if stop is not None and stop.is_set():
+            raise RenderStopped(f"calibration rendering stopped after {name}")
+
+    try:
+        rendered = render_calibration_images(rig, shots, tmp, noise=noise, seed=seed, spp=spp,
+                                             thin_lens=thin_lens, target_spp=target_spp,
+                                             progress=rendered_one)
+    except BaseException:
+        early.cancel()
+        raise
+    finally:
+        progress.close()
+    shutil.rmtree(out / "images", ignore_errors=True)
+    tmp.replace(out / "images")
+    write_json(out / "truth.json", rendered["truth"])
+    return RenderedShots(out / "images", rendered["truth"], early)
+
+
 def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed: int = 0,
                   images_dir=None, spp: int = 64, n_camera: int = 30, n_mirror: int = 6,
                   n_laser: int = 6, board=None, camera_board=None, tangential: bool = False,
                   thin_lens: bool = True, f_number: float | None = None,
                   laser_in_mirror: bool = True, target_spp: int | None = None,
-                  camera_model_rounds: int | None = None, say=print) -> dict:
+                  camera_model_rounds: int | None = None, rendered: RenderedShots | None = None,
+                  say=print) -> dict:
     """Plan + render (unless ``images_dir``) + calibrate + report.  Returns the report.
 
     ``f_number``: the aperture the calibration images are taken at (default: the rig's, the
@@ -180,6 +251,10 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
     :func:`lts360.simulator.calib_render.render_calibration_images`.
 
     ``camera_model_rounds``: see :func:`lts360.recon.calibration.from_images.calibrate_rig` (default there).
+
+    ``rendered``: the images already rendered into ``out_dir`` by :func:`render_calibration`
+    with these parameters (e.g. in the background while other work ran); only the
+    calibration is done here.
     """
     from lts360.recon.calibration.from_images import CAMERA_MODEL_ROUNDS
 
@@ -187,46 +262,16 @@ def run_calibrate(out_dir, *, rig_name: str = "paper", noise: str = "none", seed
         camera_model_rounds = CAMERA_MODEL_ROUNDS
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    truth = None
-    early = None  # the camera shots' corners found while rendering
-    if images_dir is None:
-        from lts360.scenes.calib_plan import plan_calibration
-        from lts360.scenes.rig_io import load_rig
-        from lts360.simulator.calib_render import render_calibration_images
-        from lts360.simulator.io import write_json
-
-        rig = load_rig(rig_name)
-        if f_number is not None:
-            from dataclasses import replace
-
-            rig = replace(rig, camera=replace(rig.camera, f_number=float(f_number)))
-        shots = plan_calibration(rig, board, camera_board=camera_board, n_camera=n_camera,
-                                 n_mirror=n_mirror, n_laser=n_laser, seed=seed,
-                                 laser_in_mirror=laser_in_mirror)
-        say(f"planned {len(shots)} board poses: {n_camera} camera, {n_mirror} per mirror, "
-            f"{n_laser} laser (each laser pose: board, laser on, laser off)")
-        tmp = out / ".images.partial"
-        shutil.rmtree(tmp, ignore_errors=True)
-        bar = _bar(len(shots), "rendering")
-        early = _EarlyCorners(shots)
-
-        def rendered_one(name):
-            bar.update(1)
-            early.add(name, tmp)
-
-        try:
-            rendered = render_calibration_images(rig, shots, tmp, noise=noise, seed=seed,
-                                                 spp=spp, thin_lens=thin_lens,
-                                                 target_spp=target_spp, progress=rendered_one)
-        except BaseException:
-            early.cancel()
-            raise
-        bar.close()
-        shutil.rmtree(out / "images", ignore_errors=True)
-        tmp.replace(out / "images")
-        truth = rendered["truth"]
-        write_json(out / "truth.json", truth)
-        images_dir = out / "images"
+    if rendered is None and images_dir is None:
+        rendered = render_calibration(out, rig_name=rig_name, noise=noise, seed=seed, spp=spp,
+                                      n_camera=n_camera, n_mirror=n_mirror, n_laser=n_laser,
+                                      board=board, camera_board=camera_board,
+                                      thin_lens=thin_lens, f_number=f_number,
+                                      laser_in_mirror=laser_in_mirror, target_spp=target_spp,
+                                      say=say)
+    truth = early = None
+    if rendered is not None:
+        images_dir, truth, early = rendered.images_dir, rendered.truth, rendered.early
     images = read_calibration_images(images_dir)
     known = early.result(images.camera_board) if early is not None else {}
     result = calibrate_rig(images, tangential=tangential, progress=say,
@@ -303,20 +348,21 @@ class _EarlyCorners:
             self.pool.shutdown(wait=False, cancel_futures=True)
 
 
+class _NullBar:
+    def update(self, n):
+        pass
+
+    def close(self):
+        pass
+
+
 def _bar(total: int, desc: str):
     try:
         from tqdm import tqdm
 
         return tqdm(total=total, desc=desc, unit="image")
     except ImportError:  # pragma: no cover
-        class _Null:
-            def update(self, n):
-                pass
-
-            def close(self):
-                pass
-
-        return _Null()
+        return _NullBar()
 
 
 def format_report(report: dict) -> str:

@@ -97,7 +97,67 @@ def run_demo(out: Path, *, radius_mm: float = 10.0, rig_name: str = "paper", ren
     shutil.rmtree(tmp, ignore_errors=True)
     (tmp / "objects").mkdir(parents=True)
     t0 = time.perf_counter()
+    with _Background(tmp / "calibration", rig_name=rig_name, seed=seed,
+                     start=render and paper) as calibration_shots:
+        summary = _run(tmp, rig_name=rig_name, radius_mm=radius_mm, render=render, spp=spp,
+                       seed=seed, echo=echo)
+        if render and paper:
+            summary["paper"] = _paper(tmp, rig_name=rig_name, seed=seed, trials=gauge_trials,
+                                      echo=echo, options=gauge_options or {},
+                                      rendered=calibration_shots.result())
+    (tmp / "summary.json").write_text(json.dumps(summary, indent=2))
+    shutil.rmtree(out, ignore_errors=True)
+    tmp.replace(out)
+    what = "rig.png, sections.png, rig.toml, summary.json, objects/*.ply"
+    if render:
+        what += ", frames/"
+    if render and paper:
+        what += (", calibration/ (calibration.json, report.json, fig8.png, images/), "
+                 "plug-gauge/ (table.txt, plug-gauge.png, clouds/*.ply, trials/results.nc)")
+    echo(f"\nwrote {out}/ ({what}) in {time.perf_counter() - t0:.1f} s")
+    return summary
 
+
+class _Background:
+    """The paper's calibration images (:func:`~lts360.experiments.calibration_run.render_calibration`,
+    realistic noise) rendered on a thread of their own from the demo's start: the rig, the
+    objects and the two frames that come first are mostly single-threaded Python, and the
+    renderer fills the other core meanwhile.  The images are those of a sequential run (every
+    shot has its own seed).  Leaving the ``with`` block early (an error, Ctrl-C) stops the
+    rendering after the shot in hand."""
+
+    def __init__(self, folder: Path, *, rig_name: str, seed: int, start: bool):
+        self.folder, self.rig_name, self.seed, self.start = folder, rig_name, seed, start
+        self.pool = self.future = None
+
+    def __enter__(self) -> _Background:
+        if self.start:
+            import threading
+            from concurrent.futures import ThreadPoolExecutor
+
+            from lts360.experiments.calibration_run import render_calibration
+
+            self.stop = threading.Event()
+            self.pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="lts360-calibration")
+            self.future = self.pool.submit(render_calibration, self.folder, rig_name=self.rig_name,
+                                           noise="realistic", seed=self.seed,
+                                           say=lambda *_: None, bar=False, stop=self.stop)
+        return self
+
+    def result(self):
+        return self.future.result()
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if self.pool is not None:
+            if exc_type is not None:
+                self.stop.set()
+            self.pool.shutdown(wait=True)
+
+
+def _run(tmp: Path, *, rig_name: str, radius_mm: float, render: bool, spp: int, seed: int,
+         echo) -> dict:
+    """The rig, its coverage, the objects and the plug gauge's two frames measured with the
+    true calibration: everything before the paper's calibration."""
     rig = load_rig(rig_name)
     echo(format_rig(rig))
     cov = coverage(rig, radius_mm)
@@ -139,24 +199,11 @@ def run_demo(out: Path, *, radius_mm: float = 10.0, rig_name: str = "paper", ren
                  f"{frame.exposure_time_s * 1e6:.0f} µs -> frames/plug-gauge-{noise}/")
         summary["frames"] = ["frames/plug-gauge-none", "frames/plug-gauge-realistic"]
         summary["measurements"] = _measure_frames(tmp, gauge, echo)
-    if render and paper:
-        summary["paper"] = _paper(tmp, rig_name=rig_name, seed=seed, trials=gauge_trials,
-                                  echo=echo, options=gauge_options or {})
-    (tmp / "summary.json").write_text(json.dumps(summary, indent=2))
-    shutil.rmtree(out, ignore_errors=True)
-    tmp.replace(out)
-    what = "rig.png, sections.png, rig.toml, summary.json, objects/*.ply"
-    if render:
-        what += ", frames/"
-    if render and paper:
-        what += (", calibration/ (calibration.json, report.json, fig8.png, images/), "
-                 "plug-gauge/ (table.txt, plug-gauge.png, clouds/*.ply, trials/results.nc)")
-    echo(f"\nwrote {out}/ ({what}) in {time.perf_counter() - t0:.1f} s")
     return summary
 
 
 def _paper(root: Path, *, rig_name: str, seed: int, trials: int, echo,
-           options: dict) -> dict:
+           options: dict, rendered) -> dict:
     """The paper end to end: calibrate from rendered chessboard images (realistic noise), then
     the plug-gauge evaluation of §4.5 with that calibration, measured as a user would (§4.4,
     mastered with the gauge's known diameter, the twin; ``options`` switch them), beside the
@@ -167,9 +214,10 @@ def _paper(root: Path, *, rig_name: str, seed: int, trials: int, echo,
     t = time.perf_counter()
     echo("\ncalibration from rendered chessboard images (paper §4.2–4.3, realistic noise):")
     report = run_calibrate(root / "calibration", rig_name=rig_name, noise="realistic", seed=seed,
-                           say=lambda *_: None)
+                           rendered=rendered, say=lambda *_: None)
     echo(format_report(report))
-    echo(f"  ({time.perf_counter() - t:.0f} s) -> calibration/")
+    echo(f"  ({time.perf_counter() - t:.0f} s; the images rendered in the background from the "
+         f"start) -> calibration/")
     t = time.perf_counter()
     echo(f"\nplug gauge placed {trials} times, measured with that calibration (paper §4.5):")
     table = run_plug_gauge_study(root / "plug-gauge", trials=trials, seed=seed,
