@@ -147,3 +147,22 @@ def test_render_a_moving_scan_triggered_at_a_profile_rate(tmp_path, capsys):
     frame = json.loads((out / "section_0001" / "frame.json").read_text())
     assert frame["motion"]["t_trigger_s"] == 0.02
     assert frame["motion"]["acquisition"]["trigger"]["profile_rate_hz"] == 50.0
+
+
+def test_the_console_script_runs_exit_handlers_and_keeps_exit_codes(tmp_path):
+    """``lts360`` skips the interpreter's teardown, not its exit handlers: a registered handler
+    still runs (after the command's output), a usage error still exits 2, and a reader that
+    closes the pipe early ends the command with 1 and no traceback."""
+    code = ("import atexit, sys; from lts360.cli import run; "
+            "atexit.register(lambda: print('handler ran')); sys.argv = ['lts360', *sys.argv[1:]]; "
+            "run()")
+    ok = subprocess.run([sys.executable, "-c", code, "objects"], capture_output=True, text=True)
+    assert ok.returncode == 0 and ok.stdout.rstrip().endswith("handler ran")
+    assert "plug-gauge" in ok.stdout
+    bad = subprocess.run([sys.executable, "-c", code, "frobnicate"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "handler ran" in bad.stdout and "Traceback" not in bad.stderr
+    head = subprocess.Popen([sys.executable, "-m", "lts360.cli", "objects"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    head.stdout.close()  # the reader leaves before the first line
+    assert head.wait(timeout=60) == 1
+    assert "Traceback" not in head.stderr.read().decode()

@@ -1,7 +1,5 @@
 """``python -m lts360.cli``."""
 
-import sys
+from lts360.cli import run
 
-from lts360.cli import main
-
-sys.exit(main())
+run()

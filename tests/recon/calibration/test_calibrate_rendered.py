@@ -159,6 +159,67 @@ def test_a_camera_model_round_on_the_same_images(calibrated, tmp_path):
     assert np.all(np.abs(K[:2, 2] - K_true[:2, 2]) < 2.0)
 
 
+_SMALL = dict(spp=16, target_spp=24, n_camera=10, n_mirror=3, n_laser=3, thin_lens=False)
+
+
+def _small_board():
+    from lts360.scenes.targets import Chessboard
+
+    return Chessboard(squares_x=9, squares_y=7, square_mm=4.0, margin_mm=2.0)
+
+
+@pytest.mark.slow
+def test_images_rendered_in_the_background_calibrate_as_a_sequential_run(calibrated, tmp_path):
+    """`lts360 demo` renders the calibration images on a thread of its own while the main
+    thread renders and measures frames: the same PNGs, byte for byte, as the sequential run
+    (every shot has its own seed), and the same calibration from them."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    from lts360.experiments.calibration_run import render_calibration, run_calibrate
+    from lts360.recon.model import load_calibration
+    from lts360.scenes.objects import build_object
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.frame import simulate_frame
+
+    out, report = calibrated
+    rig = report["settings"]["rig"]
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        job = pool.submit(render_calibration, tmp_path, rig_name=rig, board=_small_board(),
+                          say=lambda *_: None, bar=False, stop=threading.Event(), **_SMALL)
+        for seed in range(3):  # the main thread renders meanwhile
+            simulate_frame(load_rig(rig), build_object("plug-gauge"), spp=4, seed=seed,
+                           noise="realistic")
+        shots = job.result()
+    names = sorted(p.name for p in (out / "images").glob("*.png"))
+    assert names and names == sorted(p.name for p in shots.images_dir.glob("*.png"))
+    for name in names:
+        assert (out / "images" / name).read_bytes() == (shots.images_dir / name).read_bytes(), name
+    run_calibrate(tmp_path, rig_name=rig, rendered=shots, say=lambda *_: None, **_SMALL)
+    a, b = load_calibration(out / "calibration.json"), load_calibration(tmp_path / "calibration.json")
+    np.testing.assert_allclose(a.K, b.K, rtol=1e-6)  # OpenCV's threads: 1e-9-level differences
+    np.testing.assert_allclose(a.laser_plane[0], b.laser_plane[0], atol=1e-5)
+
+
+def test_a_stopped_background_render_leaves_no_images_folder(tmp_path):
+    """The demo stops its background rendering when it fails: after the shot in hand, with
+    :class:`RenderStopped`, and no ``images/`` that could pass for a finished set."""
+    import threading
+
+    from lts360.experiments.calibration_run import RenderStopped, render_calibration
+
+    if "llvm_ad_mono" not in mi.variants():
+        pytest.skip("Mitsuba's llvm_ad_mono variant is not available")
+    mi.set_variant("llvm_ad_mono")
+    stop = threading.Event()
+    stop.set()
+    with pytest.raises(RenderStopped, match="stopped after camera-00"):
+        render_calibration(tmp_path, rig_name="paper", board=_small_board(), say=lambda *_: None,
+                           bar=False, stop=stop, **{**_SMALL, "spp": 1})
+    assert not (tmp_path / "images").exists() and not (tmp_path / "truth.json").exists()
+    assert len(list((tmp_path / ".images.partial").glob("*.png"))) == 1
+
+
 def test_a_manifest_without_design_or_with_missing_images_fails_clearly(tmp_path):
     from lts360.recon.calibration.from_images import read_calibration_images
 
