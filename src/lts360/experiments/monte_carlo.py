@@ -303,9 +303,24 @@ def _twin_seed(vary: set, seeds) -> int | None:
     return int(np.random.SeedSequence([int(seeds[0]), 7717]).generate_state(1)[0])
 
 
+def vary_set(vary: str) -> set:
+    """The inputs a trial's ``vary`` names: ``all``, ``none`` (the nominal measurement), one
+    of :data:`INPUTS`, or several joined by ``+`` (``calibration+placement``: those vary together, to see whether their effects
+    add in quadrature as the one-at-a-time budget assumes)."""
+    if vary == "all":
+        return set(INPUTS)
+    if vary == "none":
+        return set()
+    names = set(str(vary).split("+"))
+    if not names <= set(INPUTS):
+        raise ValueError(f"vary: unknown input(s) {sorted(names - set(INPUTS))}; "
+                         f"use all or {', '.join(INPUTS)} (joined by +)")
+    return names
+
+
 def mc_trial(trial: Trial) -> TrialOutput:
     """One Monte Carlo draw (see the module docstring); ``params['vary']`` names the inputs
-    that vary (``all`` or one of :data:`INPUTS`).  ``params``: ``compensate``, ``master``,
+    that vary (:func:`vary_set`).  ``params``: ``compensate``, ``master``,
     ``bias_model`` (the configuration measured; defaults: §4.4 alone, as earlier studies),
     ``twin_per`` (:data:`~lts360.experiments.mc_measure.TWIN_PER`; default ``"trial"``) and
     ``steps`` (also each of :data:`MC_STEPS` on the same draw: ``y_<key>_um``)."""
@@ -316,7 +331,7 @@ def mc_trial(trial: Trial) -> TrialOutput:
 
     p = trial.params
     pl_mm = float(p.get("placement_mm", DEFAULT_PLACEMENT_MM))
-    vary = set(INPUTS) if p["vary"] == "all" else {p["vary"]}
+    vary = vary_set(p["vary"])
     rng = np.random.default_rng(trial.seed)
     seeds = rng.integers(0, 2**31, size=5)
     k = int(rng.integers(int(p["placements"]))) if "placement" in vary else 0
