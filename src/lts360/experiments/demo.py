@@ -101,6 +101,10 @@ def run_demo(out: Path, *, radius_mm: float = 10.0, rig_name: str = "paper", ren
                      start=render and paper) as calibration_shots:
         summary = _run(tmp, rig_name=rig_name, radius_mm=radius_mm, render=render, spp=spp,
                        seed=seed, echo=echo)
+        if calibration_shots.future is not None:
+            summary["timing_note"] = ("the calibration images rendered on another thread from "
+                                      "the start: the frames' render and measurement times "
+                                      "include that contention")
         if render and paper:
             summary["paper"] = _paper(tmp, rig_name=rig_name, seed=seed, trials=gauge_trials,
                                       echo=echo, options=gauge_options or {},
@@ -129,6 +133,7 @@ class _Background:
     def __init__(self, folder: Path, *, rig_name: str, seed: int, start: bool):
         self.folder, self.rig_name, self.seed, self.start = folder, rig_name, seed, start
         self.pool = self.future = None
+        self.stop = None
 
     def __enter__(self) -> _Background:
         if self.start:
