@@ -29,8 +29,8 @@ from lts360.recon.calibration.from_images import (
 )
 from lts360.recon.model import Calibration, calibration_from_frame_truth, save_calibration
 
-__all__ = ["run_calibrate", "render_calibration", "RenderedShots", "RenderStopped", "calibration_accuracy", "calibration_report", "plot_fig8",
-           "format_report"]
+__all__ = ["run_calibrate", "render_calibration", "RenderedShots", "RenderStopped",
+           "calibration_accuracy", "calibration_report", "plot_fig8", "format_report"]
 
 
 def _angle_deg(a, b) -> float:
