@@ -180,12 +180,14 @@ def render_calibration(out_dir, *, rig_name: str = "paper", noise: str = "none",
                        board=None, camera_board=None, thin_lens: bool = True,
                        f_number: float | None = None, laser_in_mirror: bool = True,
                        target_spp: int | None = None, say=print, bar: bool = True,
-                       stop=None) -> RenderedShots:
+                       stop=None, lock=None) -> RenderedShots:
     """Plan the board poses and render them into ``out_dir/images`` (the first half of
     :func:`run_calibrate`, whose parameters these are), detecting the camera shots' corners
     while the next shots render.  ``bar``: a progress bar on stderr; ``stop``: a
     :class:`threading.Event` checked after each shot (set: :class:`RenderStopped`, the
-    partial folder left behind), for a caller that renders in the background."""
+    partial folder left behind), and ``lock`` held while each shot renders
+    (:func:`~lts360.simulator.calib_render.render_calibration_images`), for a caller that
+    renders in the background."""
     from lts360.scenes.calib_plan import plan_calibration
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.calib_render import render_calibration_images
@@ -217,7 +219,7 @@ def render_calibration(out_dir, *, rig_name: str = "paper", noise: str = "none",
     try:
         rendered = render_calibration_images(rig, shots, tmp, noise=noise, seed=seed, spp=spp,
                                              thin_lens=thin_lens, target_spp=target_spp,
-                                             progress=rendered_one)
+                                             progress=rendered_one, lock=lock)
     except BaseException:
         early.cancel()
         raise

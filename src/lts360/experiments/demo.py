@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import threading
 import time
 from pathlib import Path
 
@@ -32,8 +33,9 @@ from lts360.scenes.rig_io import load_rig, rig_to_toml
 __all__ = ["run_demo"]
 
 
-def _measure_frames(root: Path, obj, echo) -> dict:
-    """Inverse triangulation of the demo frames with the true calibration, then scoring."""
+def _measure_frames(root: Path, obj, echo, lock) -> dict:
+    """Inverse triangulation of the demo frames with the true calibration (under ``lock``: its
+    Dr.Jit kernel), then scoring."""
     from lts360.experiments.score import score_cloud
     from lts360.recon.model import load_calibration
     from lts360.recon.triangulation.cloud import write_cloud
@@ -52,7 +54,8 @@ def _measure_frames(root: Path, obj, echo) -> dict:
         d = root / "frames" / name
         cal = load_calibration(frame_file(d))
         t0 = time.perf_counter()
-        cloud = measure_sections(collect_sections([d]), cal, grid)
+        with lock:
+            cloud = measure_sections(collect_sections([d]), cal, grid)
         dt = time.perf_counter() - t0
         write_cloud(d / "cloud.ply", cloud)
         m = score_cloud(cloud, obj, rig_truth=read_frame_meta(d))
@@ -100,7 +103,7 @@ def run_demo(out: Path, *, radius_mm: float = 10.0, rig_name: str = "paper", ren
     with _Background(tmp / "calibration", rig_name=rig_name, seed=seed,
                      start=render and paper) as calibration_shots:
         summary = _run(tmp, rig_name=rig_name, radius_mm=radius_mm, render=render, spp=spp,
-                       seed=seed, echo=echo)
+                       seed=seed, echo=echo, lock=calibration_shots.lock)
         if calibration_shots.future is not None:
             summary["timing_note"] = ("the calibration images rendered on another thread from "
                                       "the start: the frames' render and measurement times "
@@ -127,17 +130,20 @@ class _Background:
     realistic noise) rendered on a thread of their own from the demo's start: the rig, the
     objects and the two frames that come first are mostly single-threaded Python, and the
     renderer fills the other core meanwhile.  The images are those of a sequential run (every
-    shot has its own seed).  Leaving the ``with`` block early (an error, Ctrl-C) stops the
-    rendering after the shot in hand."""
+    shot has its own seed).  ``lock``: held by the shots' rendering and by the main thread's
+    own Mitsuba and Dr.Jit work (the frames, their measurement), so that the two threads
+    never trace or launch kernels at once — their Python, NumPy and OpenCV work overlaps.
+    Leaving the ``with`` block early (an error, Ctrl-C) stops the rendering after the shot
+    in hand."""
 
     def __init__(self, folder: Path, *, rig_name: str, seed: int, start: bool):
         self.folder, self.rig_name, self.seed, self.start = folder, rig_name, seed, start
         self.pool = self.future = None
         self.stop = None
+        self.lock = threading.Lock()
 
     def __enter__(self) -> _Background:
         if self.start:
-            import threading
             from concurrent.futures import ThreadPoolExecutor
 
             from lts360.experiments.calibration_run import render_calibration
@@ -146,7 +152,8 @@ class _Background:
             self.pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="lts360-calibration")
             self.future = self.pool.submit(render_calibration, self.folder, rig_name=self.rig_name,
                                            noise="realistic", seed=self.seed,
-                                           say=lambda *_: None, bar=False, stop=self.stop)
+                                           say=lambda *_: None, bar=False, stop=self.stop,
+                                           lock=self.lock)
         return self
 
     def result(self):
@@ -160,9 +167,10 @@ class _Background:
 
 
 def _run(tmp: Path, *, rig_name: str, radius_mm: float, render: bool, spp: int, seed: int,
-         echo) -> dict:
+         echo, lock) -> dict:
     """The rig, its coverage, the objects and the plug gauge's two frames measured with the
-    true calibration: everything before the paper's calibration."""
+    true calibration: everything before the paper's calibration (``lock``: held for the
+    frames' rendering and measurement, see :class:`_Background`)."""
     rig = load_rig(rig_name)
     echo(format_rig(rig))
     cov = coverage(rig, radius_mm)
@@ -197,13 +205,14 @@ def _run(tmp: Path, *, rig_name: str, radius_mm: float, render: bool, spp: int, 
 
         gauge = build_object("plug-gauge")
         for noise in ("none", "realistic"):
-            frame = simulate_frame(rig, gauge, spp=spp, seed=seed, noise=noise)
+            with lock:
+                frame = simulate_frame(rig, gauge, spp=spp, seed=seed, noise=noise)
             write_frame(tmp / "frames" / f"plug-gauge-{noise}", frame)
             echo(f"rendered the plug gauge ({noise} noise): {frame.render.seconds:.2f} s "
                  f"({frame.render.variant}, {spp} spp), exposure "
                  f"{frame.exposure_time_s * 1e6:.0f} µs -> frames/plug-gauge-{noise}/")
         summary["frames"] = ["frames/plug-gauge-none", "frames/plug-gauge-realistic"]
-        summary["measurements"] = _measure_frames(tmp, gauge, echo)
+        summary["measurements"] = _measure_frames(tmp, gauge, echo, lock)
     return summary
 
 

@@ -33,6 +33,7 @@ full-size 64-spp camera board).
 
 from __future__ import annotations
 
+import contextlib
 import functools
 from dataclasses import replace
 from pathlib import Path
@@ -261,7 +262,7 @@ def _prepared(scenes: dict, spec: SceneSpec, board, *, key: tuple):
 def render_calibration_images(rig: Rig, shots: list[BoardShot], out_dir, *, noise: str = "none",
                               seed: int = 0, spp: int = 16, thin_lens: bool = True,
                               target_spp: int | None = None, windowed: bool = True,
-                              progress=None) -> dict:
+                              progress=None, lock=None) -> dict:
     """Render every shot into ``out_dir`` (PNG + ``manifest.json``) and return the manifest.
 
     Parameters
@@ -281,6 +282,10 @@ def render_calibration_images(rig: Rig, shots: list[BoardShot], out_dir, *, nois
         configuration (see the module docstring); ``False``: every picture in full.
     progress : callable, optional
         Called with each shot's name after it is written.
+    lock : context manager, optional
+        Held while a shot renders (its Mitsuba/Dr.Jit work; not its sensor noise, file and
+        corners): a caller rendering on another thread shares one with its own Dr.Jit work,
+        so that the two never trace or launch kernels at once.
 
     Returns
     -------
@@ -309,6 +314,7 @@ def render_calibration_images(rig: Rig, shots: list[BoardShot], out_dir, *, nois
                 "mirrors": [m.name for m in rig.mirrors], "shots": []}
     truth_boards = []
     K = None
+    guard = contextlib.nullcontext() if lock is None else lock
     context = {} if windowed else None
     for k, shot in enumerate(shots):
         s = int(seed) * 1000 + k
@@ -324,13 +330,14 @@ def render_calibration_images(rig: Rig, shots: list[BoardShot], out_dir, *, nois
             # mirror a little off perpendicular to the laser plane would draw a second line
             # beside the first); the board picture with the mirrors, for both views.
             covered = shot.mirror is not None
-            on = _render(rig, shot.board, laser_on=True, spp=spp_k, seed=s, thin_lens=thin_lens,
-                         mirrors=not covered, context=context)
-            off = _render(rig, shot.board, laser_on=False, spp=spp_k, seed=s, thin_lens=thin_lens,
-                          mirrors=not covered, context=context)
-            lit = off if not covered else _render(rig, shot.board, laser_on=False, spp=spp_k,
-                                                  seed=s + 900_000, thin_lens=thin_lens,
-                                                  context=context)
+            with guard:
+                on = _render(rig, shot.board, laser_on=True, spp=spp_k, seed=s,
+                             thin_lens=thin_lens, mirrors=not covered, context=context)
+                off = _render(rig, shot.board, laser_on=False, spp=spp_k, seed=s,
+                              thin_lens=thin_lens, mirrors=not covered, context=context)
+                lit = off if not covered else _render(rig, shot.board, laser_on=False,
+                                                      spp=spp_k, seed=s + 900_000,
+                                                      thin_lens=thin_lens, context=context)
             img_board, _, _ = sensor_image(rig, lit, noise=noise, seed=s + 300_000)
             if covered:
                 entry["laser_mirrors_covered"] = True
@@ -342,9 +349,10 @@ def render_calibration_images(rig: Rig, shots: list[BoardShot], out_dir, *, nois
                 entry[f"image_{suffix}"] = f"{shot.name}-{suffix}.png"
             K, rendered_spp = on.K, on.spp
         else:
-            res = _render(rig, shot.board, laser_on=False, spp=spp_k, seed=s, thin_lens=thin_lens,
-                          mirrors=not shot.mirrors_covered, context=context,
-                          flat_interior=shot.mirrors_covered)
+            with guard:
+                res = _render(rig, shot.board, laser_on=False, spp=spp_k, seed=s,
+                              thin_lens=thin_lens, mirrors=not shot.mirrors_covered,
+                              context=context, flat_interior=shot.mirrors_covered)
             img, _, _ = sensor_image(rig, res, noise=noise, seed=s)
             if shot.mirrors_covered:
                 entry["mirrors_covered"] = True

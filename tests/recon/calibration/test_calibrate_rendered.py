@@ -171,8 +171,9 @@ def _small_board():
 @pytest.mark.slow
 def test_images_rendered_in_the_background_calibrate_as_a_sequential_run(calibrated, tmp_path):
     """`lts360 demo` renders the calibration images on a thread of its own while the main
-    thread renders and measures frames: the same PNGs, byte for byte, as the sequential run
-    (every shot has its own seed), and the same calibration from them."""
+    thread renders and measures frames (the two share a lock for their Mitsuba and Dr.Jit
+    work): the same PNGs, byte for byte, as the sequential run (every shot has its own
+    seed), and the same calibration from them."""
     import threading
     from concurrent.futures import ThreadPoolExecutor
 
@@ -184,12 +185,15 @@ def test_images_rendered_in_the_background_calibrate_as_a_sequential_run(calibra
 
     out, report = calibrated
     rig = report["settings"]["rig"]
+    lock = threading.Lock()
     with ThreadPoolExecutor(max_workers=1) as pool:
         job = pool.submit(render_calibration, tmp_path, rig_name=rig, board=_small_board(),
-                          say=lambda *_: None, bar=False, stop=threading.Event(), **_SMALL)
+                          say=lambda *_: None, bar=False, stop=threading.Event(), lock=lock,
+                          **_SMALL)
         for seed in range(3):  # the main thread renders meanwhile
-            simulate_frame(load_rig(rig), build_object("plug-gauge"), spp=4, seed=seed,
-                           noise="realistic")
+            with lock:
+                simulate_frame(load_rig(rig), build_object("plug-gauge"), spp=4, seed=seed,
+                               noise="realistic")
         shots = job.result()
     names = sorted(p.name for p in (out / "images").glob("*.png"))
     assert names and names == sorted(p.name for p in shots.images_dir.glob("*.png"))
