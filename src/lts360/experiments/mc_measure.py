@@ -185,8 +185,6 @@ def _compensate(cal, renders: str, rig_name: str, theta_step_deg: float,
 
             grid = _grid(theta_step_deg, placement_mm)
             if frozen is not None:  # the calibration file's path: the frozen correction's
-                from lts360.experiments.mc_measure import frozen_reference_bias
-
                 bias = frozen_reference_bias(frozen, renders, rig_name, float(theta_step_deg),
                                              float(placement_mm))
                 results = [apply_bias(r, bias, raw=True)[0] for r in results]
@@ -217,13 +215,13 @@ def _reference_shots(cal, renders: str, rig_name: str, theta_step_deg: float,
     rig = load_rig(rig_name)
     cal = dataclasses.replace(cal, view_offsets_mm={}, view_radial_offsets_mm={},
                               view_scales={}, master={})
+    grid = _grid(theta_step_deg, placement_mm)
     results = []
     for j in range(int(shots) if noisy else 1):  # noise-free shots would all be the same
         s = int(noise_seed) + 2 * j if noisy else 0
         ref, _, _ = sensor_image(rig, SimpleNamespace(radiance_W_m2_sr=Y0, laser_W_m2_sr=L0),
                                  noise="realistic" if noisy else "none", seed=s, speckle=noisy,
                                  speckle_seed=s + 1 if noisy else None)
-        grid = _grid(theta_step_deg, placement_mm)
         results.append(inverse_triangulate(ref, cal, grid, plan=_plan(cal, grid, memo)))
     return cal, results
 

@@ -387,6 +387,20 @@ def compensation_of(cal: Calibration, name: str, compensate: bool) -> dict:
     return out
 
 
+def _compensated_radii(grid: CylGrid, r_raw: np.ndarray, quality: np.ndarray, accept,
+                       offset_mm, radial_offset_mm: float, scale: float
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """A view's ``r_mm`` from its raw radii: the accepted qualities kept, mastered
+    (``scale·r + radial_offset_mm``), then translated by ``offset_mm`` and re-sampled on the
+    grid's rays; and the offset as an array."""
+    keep = np.isin(quality, np.asarray([int(q) for q in accept], dtype=np.uint8))
+    r = np.where(keep, r_raw, np.nan)
+    if radial_offset_mm != 0.0 or scale != 1.0:
+        r = float(scale) * r + float(radial_offset_mm)
+    offset = np.asarray(offset_mm, dtype=float).reshape(2)
+    return _shift_on_rays(grid.theta_rad, r, offset, grid.is_full_turn), offset
+
+
 def assemble_view(view_plan: ViewPlan, grid: CylGrid, peaks: PeakResult, *,
                   accept=DEFAULT_ACCEPT, offset_mm=(0.0, 0.0), radial_offset_mm: float = 0.0,
                   scale: float = 1.0) -> ViewResult:
@@ -419,12 +433,8 @@ def assemble_view(view_plan: ViewPlan, grid: CylGrid, peaks: PeakResult, *,
     if peaks.second is not None:
         second = np.full(n, np.nan)
         second[idx] = peaks.second
-    keep = np.isin(quality, np.asarray([int(q) for q in accept], dtype=np.uint8))
-    r = np.where(keep, r_raw, np.nan)
-    if radial_offset_mm != 0.0 or scale != 1.0:
-        r = float(scale) * r + float(radial_offset_mm)
-    offset = np.asarray(offset_mm, dtype=float).reshape(2)
-    r = _shift_on_rays(grid.theta_rad, r, offset, grid.is_full_turn)
+    r, offset = _compensated_radii(grid, r_raw, quality, accept, offset_mm, radial_offset_mm,
+                                   scale)
     return ViewResult(name=view_plan.view.name, theta_rad=grid.theta_rad, r_mm=r, r_raw_mm=r_raw,
                       quality=quality, intensity=intensity, window=view_plan.window,
                       offset_mm=offset, second=second)
@@ -607,21 +617,16 @@ def recompensated(result: InverseResult, cal: Calibration,
     """``result`` as :func:`inverse_triangulate` returns it for the same image and plan with
     ``cal`` and ``compensate``, where ``cal`` differs from the measured one only by its
     compensation (§4.4 offsets, mastering): the views' peaks are kept (their raw radii and
-    qualities), only the compensation is applied anew, value for value as
-    :func:`assemble_view` does.  For one image measured with several compensations of one
+    qualities), only the compensation is applied anew (:func:`_compensated_radii`, as
+    :func:`assemble_view` applies it).  For one image measured with several compensations of one
     calibration (the configurations of a Monte Carlo draw) without sampling it again."""
-    keep_q = np.asarray([int(q) for q in result.accept], dtype=np.uint8)
     views = {}
     for name, v in result.views.items():
         kw = compensation_of(cal, name, compensate)
-        r = np.where(np.isin(v.quality, keep_q), v.r_raw_mm, np.nan)
-        scale, radial = kw.get("scale", 1.0), kw.get("radial_offset_mm", 0.0)
-        if radial != 0.0 or scale != 1.0:
-            r = float(scale) * r + float(radial)
-        offset = np.asarray(kw.get("offset_mm", (0.0, 0.0)), dtype=float).reshape(2)
-        views[name] = replace(v, r_mm=_shift_on_rays(result.grid.theta_rad, r, offset,
-                                                      result.grid.is_full_turn),
-                              offset_mm=offset)
+        r, offset = _compensated_radii(result.grid, v.r_raw_mm, v.quality, result.accept,
+                                       kw.get("offset_mm", (0.0, 0.0)),
+                                       kw.get("radial_offset_mm", 0.0), kw.get("scale", 1.0))
+        views[name] = replace(v, r_mm=r, offset_mm=offset)
     return replace(result, views=views, compensated=bool(compensate))
 
 
