@@ -305,8 +305,9 @@ def _twin_seed(vary: set, seeds) -> int | None:
 
 def vary_set(vary: str) -> set:
     """The inputs a trial's ``vary`` names: ``all``, ``none`` (the nominal measurement), one
-    of :data:`INPUTS`, or several joined by ``+`` (``calibration+placement``: those vary together, to see whether their effects
-    add in quadrature as the one-at-a-time budget assumes)."""
+    of :data:`INPUTS`, or several joined by ``+`` (``calibration+placement``: those vary
+    together, to see whether their effects add in quadrature as the one-at-a-time budget
+    assumes)."""
     if vary == "all":
         return set(INPUTS)
     if vary == "none":
