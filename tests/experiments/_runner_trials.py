@@ -67,3 +67,16 @@ def run_resume_study(out_dir):
     """The study the kill test interrupts (one process, sequential)."""
     return run_study(out_dir, resume_trials(), noisy_trial, name="resume", workers=1,
                      progress=False)
+
+
+def threads_trial(trial):
+    """:func:`noisy_trial` plus what the worker's native pools and block loops use: the
+    fewest and most threads of its BLAS libraries, and the sensor's block threads."""
+    from threadpoolctl import threadpool_info
+
+    from lts360.simulator.sensor import block_threads
+
+    out = noisy_trial(trial)
+    blas = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+    return TrialOutput(values={**out.values, "blas_min": min(blas), "blas_max": max(blas),
+                               "blocks": block_threads()}, dims=out.dims, coords=out.coords)

@@ -20,6 +20,7 @@ import xarray as xr
 
 import lts360
 from lts360.experiments.runner import (
+    THREAD_ENV,
     Trial,
     TrialError,
     TrialOutput,
@@ -151,6 +152,34 @@ def test_one_pool_serves_every_call_of_a_study(tmp_path):
     sequential = run(tmp_path / "one")
     xr.testing.assert_identical(first.drop_vars("pid"), sequential)
     xr.testing.assert_identical(second.drop_vars("pid"), sequential)
+
+
+def test_pool_workers_share_the_cores_with_their_native_threads(tmp_path, monkeypatch):
+    """Each of w workers caps BLAS (numpy's and scipy's OpenBLAS) and the sensor's block loops
+    at its share of the cores, cpu // w (uncapped, their spinning threads took a quarter of a
+    Monte Carlo trial's CPU); a thread count the user set is left alone."""
+    for name in THREAD_ENV:
+        monkeypatch.delenv(name, raising=False)
+    share = max(1, (os.cpu_count() or 1) // 2)
+    ds = run(tmp_path / "capped", fn=trials_mod.threads_trial, workers=2)
+    assert set(ds["blas_max"].values.tolist()) == {share}
+    assert set(ds["blas_min"].values.tolist()) == {share}
+    assert set(ds["blocks"].values.tolist()) == {share}
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")
+    ds = run(tmp_path / "user", fn=trials_mod.threads_trial, workers=2)
+    assert set(ds["blocks"].values.tolist()) == {3}
+
+
+def test_block_threads_follow_omp_num_threads(monkeypatch):
+    from lts360.simulator.sensor import block_threads
+
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    assert block_threads() == 1
+    for bad in ("0", "two", ""):
+        monkeypatch.setenv("OMP_NUM_THREADS", bad)
+        assert block_threads() == (os.cpu_count() or 1)
+    monkeypatch.delenv("OMP_NUM_THREADS")
+    assert block_threads() == (os.cpu_count() or 1)
 
 
 def test_study_pool_is_local_processes_only(tmp_path):

@@ -407,8 +407,34 @@ def _outcomes_pool(fn, pending: list[Trial], workers: int,
 
 
 def _spawn_pool(workers: int) -> concurrent.futures.ProcessPoolExecutor:
+    threads = max(1, (os.cpu_count() or 1) // workers)
     return concurrent.futures.ProcessPoolExecutor(
-        max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+        max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+        initializer=limit_native_threads, initargs=(threads,))
+
+
+#: Environment variables of the native thread pools a worker process caps (read when the
+#: library loads: BLAS/LAPACK of numpy and scipy, OpenMP of Open3D).
+THREAD_ENV = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def limit_native_threads(threads: int) -> None:
+    """Cap the native thread pools (BLAS, LAPACK, OpenMP) of this process at ``threads``: a
+    pool worker's share of the cores.  Uncapped, each of ``w`` workers runs OpenBLAS with one
+    thread per core, whose threads spin after every call: on 2 cores they took a quarter of a
+    Monte Carlo trial's CPU and saved no wall time (BENCHMARKS.md).  Libraries loaded later
+    read the environment; those already loaded (numpy's and scipy's OpenBLAS, loaded here)
+    are capped through :mod:`threadpoolctl`.  Where the user set any of :data:`THREAD_ENV`,
+    nothing is changed."""
+    if any(name in os.environ for name in THREAD_ENV):
+        return
+    import scipy.linalg  # noqa: F401  (loads scipy's own OpenBLAS, beside numpy's)
+    from threadpoolctl import threadpool_limits
+
+    threads = max(1, int(threads))
+    for name in THREAD_ENV:
+        os.environ[name] = str(threads)
+    threadpool_limits(limits=threads)
 
 
 @contextlib.contextmanager

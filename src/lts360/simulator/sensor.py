@@ -120,10 +120,20 @@ def _row_blocks(n_rows: int) -> list[slice]:
     return [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
 
 
+def block_threads() -> int:
+    """The threads a block loop (sensor, speckle) uses by default: ``OMP_NUM_THREADS`` where
+    it is set to a positive integer (the usual cap of a process's compute threads; a study's
+    worker processes set it to their share of the cores), else the CPU count."""
+    value = os.environ.get("OMP_NUM_THREADS", "").strip()
+    if value.isdigit() and int(value) > 0:
+        return int(value)
+    return os.cpu_count() or 1
+
+
 def _run_blocks(func, n: int, workers: int | None) -> None:
     """Call ``func(i)`` for ``i < n``, on up to ``workers`` threads (numpy's random
-    generators and ufuncs release the GIL)."""
-    workers = min(n, os.cpu_count() or 1) if workers is None else max(1, min(int(workers), n))
+    generators and ufuncs release the GIL; default :func:`block_threads`)."""
+    workers = min(n, block_threads()) if workers is None else max(1, min(int(workers), n))
     if workers == 1:
         for i in range(n):
             func(i)

@@ -55,12 +55,11 @@ from __future__ import annotations
 
 import functools
 import math
-import os
 
 import numpy as np
 
 from lts360.scenes.checks import check_positive as _positive
-from lts360.simulator.sensor import _run_blocks, seed_sequence, spawn_generators
+from lts360.simulator.sensor import _run_blocks, block_threads, seed_sequence, spawn_generators
 
 __all__ = ["working_f_number", "coherent_cutoff_cyc_per_um", "speckle_size_um",
            "correlation_area_um2", "speckle_cells_per_pixel", "speckle_contrast_theory",
@@ -319,7 +318,7 @@ def speckle_on_tiles(lit, *, pixel_pitch_um: float, wavelength_nm: float, f_numb
         n = T * s + 2 * radius
         spectrum = _psf_spectrum(round(fcd, 12), radius, _fft_len(n))
         view = out.reshape(nty, T, ntx, T).transpose(0, 2, 1, 3)   # (nty, ntx, T, T), a view
-        workers = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
+        workers = block_threads() if workers is None else max(1, int(workers))
         edges = np.linspace(0, tiles.size, min(tiles.size, 4 * workers) + 1).round().astype(int)
 
         starts = np.arange(0, T, _ROW_GROUP)
@@ -544,7 +543,7 @@ def _intensity_sum(Hf: int, Wf: int, fcd: float, s: int, polarization: str, rng,
                          f"MAX_FIELD_SAMPLES={MAX_FIELD_SAMPLES}; use a smaller image")
     n_fields = 1 if polarization == "polarized" else 2
     gens = spawn_generators(rng, n_fields * _N_BLOCKS, key=_SPECKLE_KEY)
-    workers = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
+    workers = block_threads() if workers is None else max(1, int(workers))
     J = np.zeros((Hf // s, Wf // s), dtype=np.float64)
     for f in range(n_fields):
         Yt, kx_max = _field_columns(Hf, Wf, fcd, gens[f * _N_BLOCKS:(f + 1) * _N_BLOCKS],

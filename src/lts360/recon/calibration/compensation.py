@@ -95,16 +95,29 @@ def joint_view_offsets(result, *, reference: str = "direct", min_points: int = 1
     allp, shot, idx = np.concatenate(pts), np.concatenate(shot), np.concatenate(idx)
     m = len(shots)
 
+    def q(x):
+        c, t = x[:2 * m].reshape(m, 2), x[3 * m:].reshape(-1, 2)
+        return allp + np.where(idx[:, None] >= 0, t[np.maximum(idx, 0)], 0.0) - c[shot]
+
     def residual(x):
-        c, r = x[:2 * m].reshape(m, 2), x[2 * m:3 * m]
-        t = x[3 * m:].reshape(-1, 2)
-        shift = np.where(idx[:, None] >= 0, t[np.maximum(idx, 0)], 0.0)
-        return np.hypot(*(allp + shift - c[shot]).T) - r[shot]
+        return np.hypot(*q(x).T) - x[2 * m:3 * m][shot]
+
+    def jacobian(x):  # d|q|/dq = q/|q|: −it for the shot's centre, +it for the translation
+        v = q(x)
+        n = v / np.hypot(*v.T)[:, None]
+        J = np.zeros((len(v), x.size))
+        rows = np.arange(len(v))
+        J[rows, 2 * shot], J[rows, 2 * shot + 1] = -n[:, 0], -n[:, 1]
+        J[rows, 2 * m + shot] = -1.0
+        at = idx >= 0
+        J[rows[at], 3 * m + 2 * idx[at]] = n[at, 0]
+        J[rows[at], 3 * m + 2 * idx[at] + 1] = n[at, 1]
+        return J
 
     starts = [fit_circle(np.concatenate(list(s.values()))) for s in shots]
     x0 = np.concatenate([np.concatenate([f.center_mm for f in starts]),
                          [f.radius_mm for f in starts], np.zeros(2 * len(others))])
-    sol = least_squares(residual, x0, method="lm", xtol=1e-14, ftol=1e-14)
+    sol = least_squares(residual, x0, jac=jacobian, method="lm", xtol=1e-14, ftol=1e-14)
     t = sol.x[3 * m:].reshape(-1, 2)
     return {n: t[col[n]].copy() for n in others}
 
@@ -298,22 +311,45 @@ class _MasterProblem:
         ds = x[2 * m + 2 * no + nv:] if self.fit_scale else np.zeros(nv)
         return c, t, dr, ds
 
+    def _q(self, x):
+        """The corrected points relative to their shot's centre, (n, 2)."""
+        c, t, dr, ds = self.unpack(x)
+        rr = (1.0 + ds[self.vix]) * self.r0 + dr[self.vix]
+        shift = np.where(self.tix[:, None] >= 0, t[np.maximum(self.tix, 0)], 0.0)
+        return rr[:, None] * self.u0 + shift - c[self.shot]
+
     def residual(self, R, sel=None):
         """The residual function for shot radii ``R``: the corrected point's distance from its
         shot's centre minus the radius (the points ``sel`` only, if given)."""
         def residual(x):
-            c, t, dr, ds = self.unpack(x)
-            rr = (1.0 + ds[self.vix]) * self.r0 + dr[self.vix]
-            shift = np.where(self.tix[:, None] >= 0, t[np.maximum(self.tix, 0)], 0.0)
-            q = rr[:, None] * self.u0 + shift - c[self.shot]
-            res = np.hypot(*q.T) - R[self.shot]
+            res = np.hypot(*self._q(x).T) - R[self.shot]
             return res if sel is None else res[sel]
         return residual
 
+    def jacobian(self, sel=None):
+        """The residuals' Jacobian (exact): with ``n = q/|q|`` the unit vector of a corrected
+        point from its centre, −n for the centre, +n for its view's translation, ``n·u0`` for
+        its radial offset and ``r0 n·u0`` for its scale − 1 (the points ``sel`` only)."""
+        def jacobian(x):
+            q = self._q(x)
+            n = q / np.hypot(*q.T)[:, None]
+            nu = np.einsum("ij,ij->i", n, self.u0)
+            J = np.zeros((len(q), x.size))
+            rows = np.arange(len(q))
+            J[rows, 2 * self.shot], J[rows, 2 * self.shot + 1] = -n[:, 0], -n[:, 1]
+            at = self.tix >= 0
+            col = 2 * self.m + 2 * self.tix[at]
+            J[rows[at], col], J[rows[at], col + 1] = n[at, 0], n[at, 1]
+            J[rows, self.i_dr + self.vix] = nu
+            if self.fit_scale:
+                J[rows, self.i_dr + self.nv + self.vix] = self.r0 * nu
+            return J if sel is None else J[sel]
+        return jacobian
+
     def solve(self, R, x_start, keep):
         """Levenberg–Marquardt on the points ``keep``, from ``x_start``."""
-        return least_squares(self.residual(R, keep), x_start, method="lm", xtol=1e-15,
-                             ftol=1e-15, gtol=1e-15)
+        return least_squares(self.residual(R, keep), x_start, jac=self.jacobian(keep),
+                             method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
 
 
 def _master_problem(shots, names, col, fit_scale: bool) -> _MasterProblem:
