@@ -237,3 +237,51 @@ def _render_placements_once(tmp_path):
     from lts360.experiments.monte_carlo import _render_placements
 
     return _render_placements(tmp_path, 1, rig="paper", seed=3, spp=4, say=lambda *_: None)
+
+
+def test_a_trials_images_are_drawn_on_the_pixels_its_plan_reads(tmp_path, truth_calibration):
+    """The read set holds every tap of the nominal plan, and of a plan whose points moved by
+    less than its check margin: an image with speckle drawn on it alone measures bit for bit
+    as the full frame's.  A plan that reads outside it (a calibration far from the nominal)
+    gets the full frame."""
+    import dataclasses
+
+    from lts360.experiments.mc_measure import (
+        _grid,
+        _plan,
+        _read,
+        _uncompensated,
+        read_set,
+        reads_within,
+        stored_render,
+    )
+    from lts360.recon.triangulation.inverse import inverse_triangulate, plan_pixels
+    from lts360.scenes.rig_io import load_rig
+    from lts360.simulator.frame import sensor_image
+
+    renders = _render_placements_once(tmp_path)
+    res = stored_render(str(renders / "placement_00"))
+    read, check = read_set(str(truth_calibration), 2.0)
+    base = _uncompensated(str(truth_calibration))
+    w = base.image_size[0]
+    grid = _grid(2.0)
+    near = dataclasses.replace(base, K=base.K + np.array([[0, 0, 0.6], [0, 0, -0.4], [0, 0, 0]]))
+    far = dataclasses.replace(base, K=base.K + np.array([[0, 0, 6.0], [0, 0, 0], [0, 0, 0]]))
+    for cal, inside in ((base, True), (near, True), (far, False)):
+        memo = {"read_set": (read, check)}
+        plan = _plan(cal, grid, memo)
+        taps = plan_pixels(plan, margin_px=0)
+        assert bool(np.isin(taps[:, 1] * w + taps[:, 0], read).all()) is inside
+        assert reads_within(plan, check) is inside
+        assert (_read(memo, plan) is read) is inside
+    rig = load_rig("paper")
+    kw = dict(noise="none", speckle=True, speckle_seed=9)
+    full = sensor_image(rig, res, **kw)[0]
+    part = sensor_image(rig, res, read=read, **kw)[0]
+    assert not np.array_equal(full, part)               # the unread pixels are noise-free
+    for cal in (base, near):
+        a = inverse_triangulate(full, cal, grid, compensate=False)
+        b = inverse_triangulate(part, cal, grid, compensate=False)
+        for n, v in a.views.items():
+            assert np.array_equal(b.views[n].r_raw_mm, v.r_raw_mm, equal_nan=True)
+        assert np.isfinite(a.views["direct"].r_raw_mm).sum() > 20

@@ -261,6 +261,42 @@ def test_expose_held_is_expose_of_the_dense_image(sensor):
         S.expose_held(mu.shape, idx[:1], [-1.0], sensor, rng=5)
 
 
+def test_expose_held_read_draws_the_noise_on_the_read_pixels_only():
+    """``read``: the pixels nobody reads hold the noise-free image exactly; the read ones carry
+    the sensor's own fixed pattern (bit for bit, where no temporal noise is drawn) and
+    temporal noise of the full frame's distribution (mean and sd within 3 standard errors)."""
+    rng = np.random.default_rng(4)
+    shape = (256, 256)
+    mu = np.zeros(shape)
+    idx = np.sort(rng.choice(mu.size, 20_000, replace=False))
+    mu.flat[idx] = 2000.0
+    read = np.sort(rng.choice(mu.size, 30_000, replace=False))
+    sensor = sensor12(prnu_fraction=0.05, dsnu_e=20.0)
+    image = S.expose_held(shape, idx, mu.flat[idx], sensor, rng=5, read=read)
+    clean = S.expose_held(shape, idx, mu.flat[idx], sensor, rng=None, noise=False)
+    outside = np.ones(mu.size, bool)
+    outside[read] = False
+    assert np.array_equal(image.reshape(-1)[outside], clean.reshape(-1)[outside])
+    full = S.expose_held(shape, idx, mu.flat[idx], sensor, rng=6)
+    lit = np.zeros(mu.size, bool)
+    lit[idx] = True
+    for group in (lit[read], ~lit[read]):              # lit and dark read pixels
+        a = image.reshape(-1)[read][group].astype(float)
+        b = full.reshape(-1)[read][group].astype(float)
+        se = b.std() / np.sqrt(b.size)
+        assert abs(a.mean() - b.mean()) < 3 * np.sqrt(2) * se
+        assert a.std() == pytest.approx(b.std(), rel=3 * np.sqrt(2 / b.size) + 0.01)
+    # no temporal noise (no light, no dark current or read noise): the fixed pattern alone
+    quiet = sensor12(dsnu_e=20.0, dark_noise_e=0.0, dark_current_e_per_s=0.0)
+    none = np.zeros(0, np.int64)
+    a = S.expose_held(shape, none, np.zeros(0), quiet, rng=5, read=read)
+    b = S.expose_held(shape, none, np.zeros(0), quiet, rng=7)
+    assert np.array_equal(a.reshape(-1)[read], b.reshape(-1)[read])
+    assert np.unique(b).size > 10                      # the pattern is there to be compared
+    with pytest.raises(ValueError, match="read must be sorted"):
+        S.expose_held(shape, idx, mu.flat[idx], sensor, rng=5, read=read[::-1])
+
+
 @pytest.mark.parametrize("mu_d", [0.05, 0.8, 3.0])
 def test_shared_mean_draws_are_per_pixel_poisson(mu_d, monkeypatch):
     """The pixels without light (one exact mean, the dark current's) are drawn as a Poisson

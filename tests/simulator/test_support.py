@@ -177,6 +177,32 @@ def test_support_and_full_frames_get_the_same_speckle(variant, rig):
     assert np.mean(a[lit] != plain[lit]) > 0.5     # the speckle is there
 
 
+def test_sensor_image_read_draws_speckle_and_noise_where_it_is_read(variant, rig):
+    """``read`` (the pixels a plan reads): there the speckle is the full frame's, bit for
+    bit, and the sensor noise is drawn; every other pixel holds the noise-free value."""
+    from lts360.simulator.frame import render_frame, sensor_image
+
+    full, _ = render_frame(_spec(rig, build_object("plug-gauge:x=0.4")), spp=4, seed=2,
+                           scale=0.5, support="full")
+    h, w = full.laser_W_m2_sr.shape
+    near = np.zeros((h, w), bool)                      # the right half's stripe and beside it
+    near[:, w // 2:] = full.laser_W_m2_sr[:, w // 2:] > 0
+    near |= np.roll(near, 5, axis=1)
+    read = np.flatnonzero(near)
+    assert read.size > 200
+    kw = dict(seed=5, scale=0.5, exposure_time_s=2.75e-4)
+    clean = sensor_image(rig, full, noise="none", **kw)[0]
+    a = sensor_image(rig, full, noise="none", speckle=True, **kw)[0]
+    b = sensor_image(rig, full, noise="none", speckle=True, read=read, **kw)[0]
+    assert np.array_equal(b[near], a[near]) and np.array_equal(b[~near], clean[~near])
+    assert np.mean(a[near] != clean[near]) > 0.2       # the speckle is there
+    noisy = sensor_image(rig, full, noise="realistic", read=read, **kw)[0]
+    assert np.array_equal(noisy[~near], clean[~near])
+    every = sensor_image(rig, full, noise="realistic", **kw)[0]
+    moved = np.mean(noisy[near] != clean[near])   # and the noise, as often as a full frame
+    assert moved > 0.3 and moved == pytest.approx(np.mean(every[near] != clean[near]), abs=0.05)
+
+
 def test_window_and_support_intersect(variant, rig):
     """A window (a study's band) with the default support renders only their intersection;
     with ``support="full"`` the whole window, as before."""

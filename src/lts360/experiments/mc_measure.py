@@ -29,7 +29,8 @@ import numpy as np
 from lts360.experiments.gauge_study import DEFAULT_PLACEMENT_MM, GAUGE_DIAMETER_MM
 from lts360.folders import read_frame_meta
 
-__all__ = ["TWIN_PER", "frozen_image_bias", "frozen_reference_bias", "apply_bias"]
+__all__ = ["TWIN_PER", "frozen_image_bias", "frozen_reference_bias", "apply_bias",
+           "stored_render", "read_set", "reads_within", "READ_MARGIN_PX"]
 
 #: Where a Monte Carlo trial's twin correction comes from (module docstring).
 TWIN_PER = ("trial", "placement")
@@ -140,6 +141,77 @@ def _placement(frame_dir: str):
     return ch["Y"], ch["laser"], meta
 
 
+@functools.lru_cache(maxsize=16)
+def stored_render(frame_dir: str):
+    """A placement's stored radiance as :func:`~lts360.simulator.frame.sensor_image` takes it,
+    with the pixels that hold any light (``held_index``: ~0.7 % of the frame), found once per
+    process instead of by a scan of the frame in every image of every trial (the same image
+    bit for bit)."""
+    from types import SimpleNamespace
+
+    Y, L, _ = _placement(frame_dir)
+    held = np.flatnonzero((np.asarray(Y).reshape(-1) != 0) | (np.asarray(L).reshape(-1) != 0))
+    return SimpleNamespace(radiance_W_m2_sr=Y, laser_W_m2_sr=L, held_index=held)
+
+
+# -- the pixels a trial reads ---------------------------------------------------------------
+#: Margin (px) of the read set about the nominal plan's taps, and the distance (px) a trial's
+#: plan may move its sample points from the nominal plan's while its taps stay inside it.
+READ_MARGIN_PX = 3
+_CHECK_MARGIN_PX = READ_MARGIN_PX - 2
+
+
+@functools.lru_cache(maxsize=8)
+def read_set(cal_path: str, theta_step_deg: float, placement_mm: float = DEFAULT_PLACEMENT_MM):
+    """The pixels a trial's images are read at (sorted flat indices): the taps of the nominal
+    calibration's plan for the trial grid (:func:`~lts360.recon.triangulation.inverse.
+    plan_pixels`), widened by :data:`READ_MARGIN_PX`, ~1 % of a frame; and the mask of where a
+    drawn plan's sample points may fall for its taps to be inside it (the nominal points
+    widened by :data:`_CHECK_MARGIN_PX`).  Once per process: every placement is measured on
+    the same grid."""
+    from lts360.recon.triangulation.inverse import plan_inverse, plan_pixels
+
+    cal = _uncompensated(cal_path)
+    plan = plan_inverse(cal, _grid(theta_step_deg, placement_mm), precompute=False)
+    w, h = cal.image_size
+    xy = plan_pixels(plan, margin_px=READ_MARGIN_PX)
+    check = np.zeros((h, w), bool)
+    inner = plan_pixels(plan, margin_px=_CHECK_MARGIN_PX)
+    check[inner[:, 1], inner[:, 0]] = True
+    return np.sort(xy[:, 1].astype(np.int64) * w + xy[:, 0]), check
+
+
+def reads_within(plan, check: np.ndarray) -> bool:
+    """Whether every sample point of ``plan`` lies where ``check`` (of :func:`read_set`) allows:
+    its cubic taps are then inside the read set (the point's pixel ``floor(uv)`` within
+    :data:`_CHECK_MARGIN_PX` of a nominal point's, its taps ``−1 … +2`` from it)."""
+    h, w = check.shape
+    flat = check.reshape(-1)
+    for vp in plan.views.values():
+        u, v = vp.uv[..., 0], vp.uv[..., 1]
+        with np.errstate(invalid="ignore"):
+            ok = (u >= 0) & (v >= 0) & (u < w) & (v < h)       # NaN: not sampled
+        if not np.all(ok | np.isnan(u) | np.isnan(v)):
+            return False
+        # the pixel floor(uv) (truncation: non-negative here)
+        if not flat[v[ok].astype(np.int64) * w + u[ok].astype(np.int64)].all():
+            return False
+    return True
+
+
+def _read(memo: dict | None, plan):
+    """The read set for images measured with ``plan`` (``memo["read_set"]``, from
+    :func:`read_set`), or None — the full frame — without one or where the plan reads
+    outside it (a calibration drawn far from the nominal one)."""
+    rs = memo.get("read_set") if memo is not None else None
+    if rs is None:
+        return None
+    key = ("reads_within", id(plan.views))  # the plan's forms for a draw's calibrations
+    if key not in memo or memo[key][0] is not plan.views:
+        memo[key] = (plan.views, reads_within(plan, rs[1]))
+    return rs[0] if memo[key][1] else None
+
+
 @functools.lru_cache(maxsize=2)
 def _calibration(path: str):
     from lts360.recon.model import load_calibration
@@ -203,26 +275,27 @@ def _reference_shots(cal, renders: str, rig_name: str, theta_step_deg: float,
                      noise_seed: int | None, shots: int, placement_mm: float,
                      memo: dict | None = None):
     """``cal`` without any compensation, and the reference placement's shots measured with
-    it (:func:`_compensate`'s images: noise-free, or ``shots`` noisy ones from ``noise_seed``)."""
-    from types import SimpleNamespace
-
+    it (:func:`_compensate`'s images: noise-free, or ``shots`` noisy ones from ``noise_seed``;
+    a noisy one drawn on :func:`read_set`'s pixels where the plan reads within them)."""
     from lts360.recon.triangulation.inverse import inverse_triangulate
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import sensor_image
 
-    Y0, L0, _ = _placement(str(Path(renders) / "placement_00"))
+    res0 = stored_render(str(Path(renders) / "placement_00"))
     noisy = noise_seed is not None
     rig = load_rig(rig_name)
     cal = dataclasses.replace(cal, view_offsets_mm={}, view_radial_offsets_mm={},
                               view_scales={}, master={})
     grid = _grid(theta_step_deg, placement_mm)
+    plan = _plan(cal, grid, memo)
+    read = _read(memo, plan) if noisy else None
     results = []
     for j in range(int(shots) if noisy else 1):  # noise-free shots would all be the same
         s = int(noise_seed) + 2 * j if noisy else 0
-        ref, _, _ = sensor_image(rig, SimpleNamespace(radiance_W_m2_sr=Y0, laser_W_m2_sr=L0),
-                                 noise="realistic" if noisy else "none", seed=s, speckle=noisy,
-                                 speckle_seed=s + 1 if noisy else None)
-        results.append(inverse_triangulate(ref, cal, grid, plan=_plan(cal, grid, memo)))
+        ref, _, _ = sensor_image(rig, res0, noise="realistic" if noisy else "none", seed=s,
+                                 speckle=noisy, speckle_seed=s + 1 if noisy else None,
+                                 read=read)
+        results.append(inverse_triangulate(ref, cal, grid, plan=plan))
     return cal, results
 
 
@@ -270,15 +343,10 @@ def _bias_of(result, entry) -> dict[str, np.ndarray]:
 
 
 def _noise_free_image(frame_dir: str, rig_name: str):
-    from types import SimpleNamespace
-
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import sensor_image
 
-    Y, L, _ = _placement(frame_dir)
-    img, _, _ = sensor_image(load_rig(rig_name), SimpleNamespace(radiance_W_m2_sr=Y,
-                                                                  laser_W_m2_sr=L), noise="none")
-    return img
+    return sensor_image(load_rig(rig_name), stored_render(frame_dir), noise="none")[0]
 
 
 def _frozen(image, cal, grid, compensate: bool) -> dict[str, np.ndarray]:

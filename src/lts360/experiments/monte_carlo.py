@@ -126,8 +126,12 @@ from lts360.experiments.mc_measure import (
     _grid,
     _nominal_calibration,
     _placement,
+    _plan,
+    _read,
     _uncompensated,
     measure,
+    read_set,
+    stored_render,
 )
 from lts360.experiments.runner import Trial, TrialOutput, plan_trials, run_study, study_pool
 from lts360.folders import is_frame, read_frame_meta
@@ -325,8 +329,6 @@ def mc_trial(trial: Trial) -> TrialOutput:
     ``bias_model`` (the configuration measured; defaults: §4.4 alone, as earlier studies),
     ``twin_per`` (:data:`~lts360.experiments.mc_measure.TWIN_PER`; default ``"trial"``) and
     ``steps`` (also each of :data:`MC_STEPS` on the same draw: ``y_<key>_um``)."""
-    from types import SimpleNamespace
-
     from lts360.scenes.rig_io import load_rig
     from lts360.simulator.frame import sensor_image
 
@@ -337,12 +339,6 @@ def mc_trial(trial: Trial) -> TrialOutput:
     seeds = rng.integers(0, 2**31, size=5)
     k = int(rng.integers(int(p["placements"]))) if "placement" in vary else 0
     frame_dir = str(Path(p["renders"]) / f"placement_{k:02d}")
-    Y, L, meta = _placement(frame_dir)
-    res = SimpleNamespace(radiance_W_m2_sr=Y, laser_W_m2_sr=L)
-    image, _, _ = sensor_image(load_rig(p["rig"]), res,
-                               noise="realistic" if "sensor_noise" in vary else "none",
-                               seed=int(seeds[0]), speckle="speckle" in vary,
-                               speckle_seed=int(seeds[1]))
     step = float(p["theta_step_deg"])
     compensate = bool(p.get("compensate", True))
     master = bool(p.get("master", False)) and compensate
@@ -353,7 +349,9 @@ def mc_trial(trial: Trial) -> TrialOutput:
     if twin_per not in TWIN_PER:
         raise ValueError(f"twin_per must be one of {', '.join(TWIN_PER)}, got {twin_per!r}")
     grid = _grid(step, pl_mm)
-    memo: dict = {}  # the draw's calibration and reference shots, shared by its steps
+    # the draw's calibration, plan and reference shots, shared by its steps; its images drawn
+    # on the pixels its plan reads (read_set)
+    memo: dict = {"read_set": read_set(p["calibration"], step, pl_mm)}
     if (twin_seed := _twin_seed(vary, seeds)) is not None:
         memo["twin_seed"] = twin_seed
     frozen = ((frame_dir, p["calibration"], p["renders"], p["rig"], step, pl_mm)
@@ -361,6 +359,10 @@ def mc_trial(trial: Trial) -> TrialOutput:
     cal_kw = dict(memo=memo, frozen=p["calibration"] if frozen else None)
     cal = _trial_calibration(p, vary, seeds, compensate=compensate, master=master,
                              bias_model=bias_model, **cal_kw)
+    image, _, _ = sensor_image(load_rig(p["rig"]), stored_render(frame_dir),
+                               noise="realistic" if "sensor_noise" in vary else "none",
+                               seed=int(seeds[0]), speckle="speckle" in vary,
+                               speckle_seed=int(seeds[1]), read=_read(memo, _plan(cal, grid, memo)))
     out, plain, twin_bias = measure(image, cal, grid, bias_model, memo, frozen)
     offset = _offset_mm(frame_dir)
     dT = float(np.random.default_rng(seeds[3]).uniform(-DELTA_T_K, DELTA_T_K)) \

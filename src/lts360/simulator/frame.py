@@ -271,7 +271,7 @@ def _evaluated(fn):
 def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int = 0,
                  speckle_seed: int | None = None, scale: float = 1.0,
                  exposure_time_s: float | None = None, exposure_fraction: float = 0.8,
-                 speckle: bool | None = None) -> tuple[np.ndarray, float, float]:
+                 speckle: bool | None = None, read=None) -> tuple[np.ndarray, float, float]:
     """The camera's digital image of a rendered radiance image (speckle + EMVA 1288 sensor).
 
     Parameters
@@ -291,6 +291,13 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
     exposure_time_s : float, optional
         Fixed exposure; by default the brightest laser-lit pixels (99.9th percentile; all
         pixels when nothing is laser-lit) land at ``exposure_fraction`` of full scale.
+    read : (n,) int, optional
+        Sorted flat indices of the only pixels the caller will read (an inverse plan's taps,
+        :func:`lts360.recon.triangulation.inverse.plan_pixels`): speckle and sensor noise are
+        drawn there alone (:func:`lts360.simulator.sensor.expose_held`), every other pixel
+        holds its noise-free value.  A read pixel's speckle is the full frame's (position
+        keyed); its sensor noise another draw of the same distribution.  The exposure is the
+        full frame's.
 
     Returns
     -------
@@ -330,8 +337,13 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
         lit = laser > 0
         on = np.flatnonzero(laser != 0)
         held = np.flatnonzero(flat)
-    if 2 * held.size > flat.size:
+    if read is not None:
+        read = np.asarray(read, np.int64).reshape(-1)
+    if 2 * held.size > flat.size and read is None:
         held = None
+        radiance = flat.astype(np.float64)
+    elif 2 * held.size > flat.size:
+        held = np.arange(flat.size)
         radiance = flat.astype(np.float64)
     else:
         held = np.union1d(held, on) if rendered is None else held
@@ -341,6 +353,11 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
     if speckle and on.size:
         # Position-keyed speckle on the tiles that hold laser light: a pixel's speckle is the
         # same whichever other pixels were rendered (a support frame's equals a full frame's).
+        lit_all = lit
+        if read is not None:  # only where it is read (the same values there)
+            on = on[_member(on, read)]
+            lit = np.zeros(laser.shape, bool)
+            lit.flat[on[laser.flat[on] > 0]] = True
         pattern = speckle_on_tiles(lit, pixel_pitch_um=pitch_um,
                                    wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
                                    magnification=magnification,
@@ -348,6 +365,7 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
         # Added where the laser share is not 0 only (elsewhere the term is 0: the same sums).
         at = on if held is None else np.searchsorted(held, on)
         radiance[at] += laser.flat[on] * (pattern.flat[on] - 1.0)
+        lit = lit_all
     if exposure_time_s is None:
         # The statistic over the laser-lit pixels only (the same values as a mask over the
         # whole frame, without converting the dark rest).
@@ -370,8 +388,16 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
         image = sensor_mod.expose_held(res.radiance_W_m2_sr.shape, held, electrons, sens,
                                        rng=np.random.default_rng(seeds[1]),
                                        noise=noise == "realistic",
-                                       exposure_time_s=exposure_time_s)
+                                       exposure_time_s=exposure_time_s, read=read)
     return image, float(exposure_time_s), float(magnification)
+
+
+def _member(values: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
+    """Whether each of ``values`` is in ``sorted_set`` (sorted, unique)."""
+    at = np.searchsorted(sorted_set, values)
+    ok = at < sorted_set.size
+    ok[ok] = sorted_set[at[ok]] == values[ok]
+    return ok
 
 
 def write_frame(out_dir, frame: Frame) -> Path:

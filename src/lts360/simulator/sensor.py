@@ -352,16 +352,21 @@ def expose(electrons_mean, sensor: SensorModel, *, rng, noise: bool = True,
 
 
 def _expose(shape: tuple[int, ...], index, mu: np.ndarray, sensor: SensorModel, *, rng,
-            noise: bool, fixed_pattern_noise, exposure_time_s, workers) -> np.ndarray:
+            noise: bool, fixed_pattern_noise, exposure_time_s, workers,
+            fpn: FixedPattern | None = None) -> np.ndarray:
     """:func:`expose` of the mean electrons ``mu`` (checked): the dense image when ``index``
     is None, else the values at the flat indices ``index`` (sorted, each once; 0 elsewhere).
     A pixel without light has ``0 · gain + mu_d = mu_d`` before its draws: the same numbers
-    whether it is multiplied out or filled in."""
+    whether it is multiplied out or filled in.  ``fpn``: the fixed pattern to use (of
+    ``shape``) instead of the sensor's for ``shape``."""
     t = sensor.exposure_time_s if exposure_time_s is None else float(exposure_time_s)
     if not (math.isfinite(t) and t >= 0):
         raise ValueError(f"exposure_time_s must be finite and >= 0, got {exposure_time_s!r}")
     use_fpn = noise if fixed_pattern_noise is None else bool(fixed_pattern_noise)
-    fpn = fixed_pattern(shape, sensor) if use_fpn else None
+    if not use_fpn:
+        fpn = None
+    elif fpn is None:
+        fpn = fixed_pattern(shape, sensor)
     K = sensor.system_gain
     offset = float(sensor.dark_offset_dn)
     full_well = float(sensor.full_well_e)
@@ -472,22 +477,50 @@ def _expected_into(out: np.ndarray, index: np.ndarray, mu: np.ndarray, *, mu_d: 
 
 def expose_held(shape: tuple[int, ...], index, electrons_mean, sensor: SensorModel, *, rng,
                 noise: bool = True, exposure_time_s: float | None = None,
-                workers: int | None = None) -> np.ndarray:
+                workers: int | None = None, read=None) -> np.ndarray:
     """:func:`expose` of an image of ``shape`` whose mean electrons are ``electrons_mean`` at
     the flat indices ``index`` (each once) and 0 elsewhere — a frame whose light is held by a
     few pixels.  The same image as ``expose`` of the dense array, bit for bit (the same draws
-    from the same streams); the dark pixels are not converted from a dense array."""
+    from the same streams); the dark pixels are not converted from a dense array.
+
+    ``read`` (sorted flat indices, each once; with ``noise``): the only pixels the caller
+    reads — an inverse-triangulation plan's taps (:func:`lts360.recon.triangulation.inverse.
+    plan_pixels`), ~3 % of a frame.  The temporal and fixed-pattern noise is drawn on them
+    alone (the fixed pattern is the sensor's at those pixels; the temporal draws are another
+    realisation of the same distribution than the full frame's); every other pixel holds its
+    noise-free value, as ``noise=False`` gives it."""
     shape = tuple(int(n) for n in shape)
     if not shape or any(n < 1 for n in shape):
         raise ValueError(f"shape must be positive integers, got {shape}")
-    idx = np.asarray(index, np.int64).reshape(-1)
+    idx = _flat_index(index, shape, "index")
     mu = _as_nonneg_array(electrons_mean, "electrons_mean").reshape(-1)
     if mu.shape != idx.shape:
         raise ValueError(f"index and electrons_mean differ in length: {idx.size} != {mu.size}")
+    if read is None or not noise:
+        return _expose(shape, idx, mu, sensor, rng=rng, noise=noise, fixed_pattern_noise=None,
+                       exposure_time_s=exposure_time_s, workers=workers)
+    read = _flat_index(read, shape, "read")
+    out = _expose(shape, idx, mu, sensor, rng=None, noise=False, fixed_pattern_noise=False,
+                  exposure_time_s=exposure_time_s, workers=workers)
+    at = np.searchsorted(idx, read)
+    hit = at < idx.size
+    hit[hit] = idx[at[hit]] == read[hit]
+    mu_read = np.zeros(read.size)
+    mu_read[hit] = mu[at[hit]]
+    fp = fixed_pattern(shape, sensor)
+    sub = FixedPattern(prnu_gain=fp.prnu_gain.reshape(-1)[read], dsnu_e=fp.dsnu_e.reshape(-1)[read])
+    out.reshape(-1)[read] = _expose((read.size,), None, mu_read, sensor, rng=rng, noise=True,
+                                    fixed_pattern_noise=True, exposure_time_s=exposure_time_s,
+                                    workers=workers, fpn=sub)
+    return out
+
+
+def _flat_index(index, shape: tuple[int, ...], name: str) -> np.ndarray:
+    """``index`` as int64 flat indices, checked: sorted, each once, inside ``shape``."""
+    idx = np.asarray(index, np.int64).reshape(-1)
     if idx.size and (idx[0] < 0 or idx[-1] >= math.prod(shape) or np.any(np.diff(idx) <= 0)):
-        raise ValueError("index must be sorted flat indices inside the image, each once")
-    return _expose(shape, idx, mu, sensor, rng=rng, noise=noise, fixed_pattern_noise=None,
-                   exposure_time_s=exposure_time_s, workers=workers)
+        raise ValueError(f"{name} must be sorted flat indices inside the image, each once")
+    return idx
 
 
 def expected_dn(electrons_mean, sensor: SensorModel, *, exposure_time_s: float | None = None
