@@ -71,7 +71,8 @@ def run_resume_study(out_dir):
 
 def threads_trial(trial):
     """:func:`noisy_trial` plus what the worker's native pools and block loops use: the
-    fewest and most threads of its BLAS libraries, and the sensor's block threads."""
+    fewest and most threads of its BLAS libraries, the sensor's block threads and Dr.Jit's."""
+    import drjit
     from threadpoolctl import threadpool_info
 
     from lts360.simulator.sensor import block_threads
@@ -79,4 +80,5 @@ def threads_trial(trial):
     out = noisy_trial(trial)
     blas = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
     return TrialOutput(values={**out.values, "blas_min": min(blas), "blas_max": max(blas),
-                               "blocks": block_threads()}, dims=out.dims, coords=out.coords)
+                               "blocks": block_threads(), "drjit": drjit.thread_count()},
+                       dims=out.dims, coords=out.coords)

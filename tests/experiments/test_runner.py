@@ -155,8 +155,8 @@ def test_one_pool_serves_every_call_of_a_study(tmp_path):
 
 
 def test_pool_workers_share_the_cores_with_their_native_threads(tmp_path, monkeypatch):
-    """Each of w workers caps BLAS (numpy's and scipy's OpenBLAS) and the sensor's block loops
-    at its share of the cores, cpu // w (uncapped, their spinning threads took a quarter of a
+    """Each of w workers caps BLAS (numpy's and scipy's OpenBLAS), Dr.Jit and the sensor's
+    block loops at its share of the cores, cpu // w (uncapped, their spinning threads took a quarter of a
     Monte Carlo trial's CPU); a thread count the user set is left alone."""
     for name in THREAD_ENV:
         monkeypatch.delenv(name, raising=False)
@@ -165,6 +165,7 @@ def test_pool_workers_share_the_cores_with_their_native_threads(tmp_path, monkey
     assert set(ds["blas_max"].values.tolist()) == {share}
     assert set(ds["blas_min"].values.tolist()) == {share}
     assert set(ds["blocks"].values.tolist()) == {share}
+    assert set(ds["drjit"].values.tolist()) == {share}
     monkeypatch.setenv("OMP_NUM_THREADS", "3")
     ds = run(tmp_path / "user", fn=trials_mod.threads_trial, workers=2)
     assert set(ds["blocks"].values.tolist()) == {3}
