@@ -15,7 +15,10 @@ trials on ``c`` cores is ``1000 × median / c`` (the study's pool runs one trial
 
 Usage: python benchmarks/bench_mc_trial.py --setup DIR [--placements 2] [--trials 8]
        [--theta-step-deg 0.5] [--no-master] [--bias-model twin|none] [--no-steps]
-       [--twin-per trial|placement] [--json OUT]
+       [--twin-per trial|placement] [--as-worker W] [--json OUT]
+
+``--as-worker 2`` times a trial as one of the study's two pool workers on two cores runs it:
+BLAS, OpenMP, Dr.Jit and the sensor's block loops at one thread each.
 """
 
 from __future__ import annotations
@@ -40,9 +43,22 @@ def main(argv=None) -> None:
     ap.add_argument("--bias-model", choices=("twin", "none"), default="twin")
     ap.add_argument("--no-steps", dest="steps", action="store_false")
     ap.add_argument("--twin-per", choices=("trial", "placement"), default="trial")
+    ap.add_argument("--as-worker", type=int, default=None, metavar="W",
+                    help="run as one of W pool workers: native threads capped as the "
+                         "study's pool caps them (limit_native_threads(cpu // W)); a checkout "
+                         "without the cap runs uncapped, as its studies did")
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
 
+    capped = None
+    if args.as_worker:
+        try:
+            from lts360.experiments.runner import limit_native_threads
+        except ImportError:
+            capped = False
+        else:
+            limit_native_threads(max(1, (os.cpu_count() or 1) // args.as_worker))
+            capped = True
     import mitsuba as mi
 
     mi.set_variant("llvm_ad_mono")
@@ -88,7 +104,8 @@ def main(argv=None) -> None:
            "estimate_1000_cpu_s": 1000 * statistics.median(cpu[1:]) / cores,
            "configuration": {"master": args.master, "bias_model": args.bias_model,
                              "steps": args.steps, "twin_per": args.twin_per},
-           "cores": cores, "load_average": os.getloadavg(), "setup_s": base.get("setup_s")}
+           "cores": cores, "load_average": os.getloadavg(), "setup_s": base.get("setup_s"),
+           "as_worker": args.as_worker, "threads_capped": capped}
     text = json.dumps(out, indent=2)
     print(text)
     if args.json:

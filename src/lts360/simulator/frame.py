@@ -307,7 +307,6 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
         Lateral magnification at the focus distance (the working f-number is N (1 + m)).
     """
     from lts360.simulator import sensor as sensor_mod
-    from lts360.simulator.speckle import speckle_on_tiles
 
     if noise not in NOISE_MODES:
         raise ValueError(f"noise must be one of {', '.join(NOISE_MODES)}, got {noise!r}")
@@ -351,21 +350,8 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
     if speckle is None:
         speckle = noise == "realistic"
     if speckle and on.size:
-        # Position-keyed speckle on the tiles that hold laser light: a pixel's speckle is the
-        # same whichever other pixels were rendered (a support frame's equals a full frame's).
-        lit_all = lit
-        if read is not None:  # only where it is read (the same values there)
-            on = on[_member(on, read)]
-            lit = np.zeros(laser.shape, bool)
-            lit.flat[on[laser.flat[on] > 0]] = True
-        pattern = speckle_on_tiles(lit, pixel_pitch_um=pitch_um,
-                                   wavelength_nm=rig.laser.wavelength_nm, f_number=cam.f_number,
-                                   magnification=magnification,
-                                   rng=np.random.default_rng(seeds[0]))
-        # Added where the laser share is not 0 only (elsewhere the term is 0: the same sums).
-        at = on if held is None else np.searchsorted(held, on)
-        radiance[at] += laser.flat[on] * (pattern.flat[on] - 1.0)
-        lit = lit_all
+        _add_speckle(radiance, held, on, lit, laser, read, rig=rig, pitch_um=pitch_um,
+                     magnification=magnification, rng=np.random.default_rng(seeds[0]))
     if exposure_time_s is None:
         # The statistic over the laser-lit pixels only (the same values as a mask over the
         # whole frame, without converting the dark rest).
@@ -390,6 +376,26 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
                                        noise=noise == "realistic",
                                        exposure_time_s=exposure_time_s, read=read)
     return image, float(exposure_time_s), float(magnification)
+
+
+def _add_speckle(radiance: np.ndarray, held, on: np.ndarray, lit: np.ndarray, laser, read, *,
+                 rig: Rig, pitch_um: float, magnification: float, rng) -> None:
+    """Speckle on the laser share of ``radiance`` (the values at ``held``, or the whole frame
+    where ``held`` is None), in place: position keyed, on the tiles that hold laser light, so
+    a pixel's speckle is the same whichever other pixels were rendered (a support frame's
+    equals a full frame's); with ``read``, only on the read pixels (the same values there)."""
+    from lts360.simulator.speckle import speckle_on_tiles
+
+    if read is not None:
+        on = on[_member(on, read)]
+        lit = np.zeros(laser.shape, bool)
+        lit.flat[on[laser.flat[on] > 0]] = True
+    pattern = speckle_on_tiles(lit, pixel_pitch_um=pitch_um,
+                               wavelength_nm=rig.laser.wavelength_nm,
+                               f_number=rig.camera.f_number, magnification=magnification, rng=rng)
+    # Added where the laser share is not 0 only (elsewhere the term is 0: the same sums).
+    at = on if held is None else np.searchsorted(held, on)
+    radiance[at] += laser.flat[on] * (pattern.flat[on] - 1.0)
 
 
 def _member(values: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
