@@ -126,7 +126,7 @@ def _add_monte_carlo(studies) -> None:
                    help="trial (default): each draw's twin rendered from its own section and "
                    "calibration, as a user's measurement; placement: each placement's twin "
                    "correction computed once (noise-free, nominal calibration) and reused — "
-                   "about 3x faster a trial, without the correction's own variation with the "
+                   "about 4x faster a trial, without the correction's own variation with the "
                    "draw (BENCHMARKS.md)")
     q.add_argument("--placement-mm", type=float, default=0.3, metavar="R",
                    help="rendered placements drawn uniformly in a disc of radius R mm about the "

@@ -78,8 +78,8 @@ the one-at-a-time runs, whose inputs do not include it).
 
 ``twin_per="placement"`` (``--twin-per placement``) computes each placement's correction once
 per process instead, from its noise-free image and the nominal calibration
-(:mod:`lts360.experiments.mc_measure`), and subtracts it in every trial: a third of the
-CPU a trial, but the correction's own variation with the draw (its calibration, the noisy
+(:mod:`lts360.experiments.mc_measure`), and subtracts it in every trial: a quarter of the
+CPU a trial (0.16 against 0.63 s on the 2-core VM, BENCHMARKS.md), but the correction's own variation with the draw (its calibration, the noisy
 section it is shaped from, its render noise) is left out of u(y).  On the same draws
 (``benchmarks/bench_mc_twin.py``) the two differ by 0.54 µm rms in y (at most 1.8 µm over 24
 draws) against a u(y) of 3.0 µm: for design sweeps and quick looks; the default for the
