@@ -419,8 +419,8 @@ THREAD_ENV = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 def limit_native_threads(threads: int) -> None:
-    """Cap the native thread pools (BLAS, LAPACK, OpenMP) of this process at ``threads``: a
-    pool worker's share of the cores.  Uncapped, each of ``w`` workers runs OpenBLAS with one
+    """Cap the native thread pools (BLAS, LAPACK, OpenMP, Dr.Jit's) of this process at
+    ``threads``: a pool worker's share of the cores.  Uncapped, each of ``w`` workers runs OpenBLAS with one
     thread per core, whose threads spin after every call: on 2 cores they took a quarter of a
     Monte Carlo trial's CPU and saved no wall time (BENCHMARKS.md).  Libraries loaded later
     read the environment; those already loaded (numpy's and scipy's OpenBLAS, loaded here)

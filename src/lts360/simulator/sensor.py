@@ -485,10 +485,10 @@ def expose_held(shape: tuple[int, ...], index, electrons_mean, sensor: SensorMod
 
     ``read`` (sorted flat indices, each once; with ``noise``): the only pixels the caller
     reads — an inverse-triangulation plan's taps (:func:`lts360.recon.triangulation.inverse.
-    plan_pixels`), ~3 % of a frame.  The temporal and fixed-pattern noise is drawn on them
+    plan_pixels`), ~1 % of a frame.  The temporal and fixed-pattern noise is drawn on them
     alone (the fixed pattern is the sensor's at those pixels; the temporal draws are another
-    realisation of the same distribution than the full frame's); every other pixel holds its
-    noise-free value, as ``noise=False`` gives it."""
+    realisation of the full frame's distribution); every other pixel holds its noise-free
+    value, as ``noise=False`` gives it."""
     shape = tuple(int(n) for n in shape)
     if not shape or any(n < 1 for n in shape):
         raise ValueError(f"shape must be positive integers, got {shape}")
