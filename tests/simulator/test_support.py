@@ -201,6 +201,8 @@ def test_sensor_image_read_draws_speckle_and_noise_where_it_is_read(variant, rig
     every = sensor_image(rig, full, noise="realistic", **kw)[0]
     moved = np.mean(noisy[near] != clean[near])   # and the noise, as often as a full frame
     assert moved > 0.3 and moved == pytest.approx(np.mean(every[near] != clean[near]), abs=0.05)
+    with pytest.raises(ValueError, match="read must be sorted"):   # also with no sensor noise
+        sensor_image(rig, full, noise="none", speckle=True, read=read[::-1], **kw)
 
 
 def test_window_and_support_intersect(variant, rig):

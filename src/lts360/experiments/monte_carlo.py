@@ -79,8 +79,9 @@ the one-at-a-time runs, whose inputs do not include it).
 ``twin_per="placement"`` (``--twin-per placement``) computes each placement's correction once
 per process instead, from its noise-free image and the nominal calibration
 (:mod:`lts360.experiments.mc_measure`), and subtracts it in every trial: a quarter of the
-CPU a trial (0.16 against 0.63 s on the 2-core VM, BENCHMARKS.md), but the correction's own variation with the draw (its calibration, the noisy
-section it is shaped from, its render noise) is left out of u(y).  On the same draws
+CPU a trial (0.16 against 0.63 s on the 2-core VM, BENCHMARKS.md), but the correction's own
+variation with the draw (its calibration, the noisy section it is shaped from, its render
+noise) is left out of u(y).  On the same draws
 (``benchmarks/bench_mc_twin.py``) the two differ by 0.54 µm rms in y (at most 1.8 µm over 24
 draws) against a u(y) of 3.0 µm: for design sweeps and quick looks; the default for the
 uncertainty one states.
@@ -359,10 +360,11 @@ def mc_trial(trial: Trial) -> TrialOutput:
     cal_kw = dict(memo=memo, frozen=p["calibration"] if frozen else None)
     cal = _trial_calibration(p, vary, seeds, compensate=compensate, master=master,
                              bias_model=bias_model, **cal_kw)
+    read = _read(memo, _plan(cal, grid, memo))
     image, _, _ = sensor_image(load_rig(p["rig"]), stored_render(frame_dir),
                                noise="realistic" if "sensor_noise" in vary else "none",
                                seed=int(seeds[0]), speckle="speckle" in vary,
-                               speckle_seed=int(seeds[1]), read=_read(memo, _plan(cal, grid, memo)))
+                               speckle_seed=int(seeds[1]), read=read)
     out, plain, twin_bias = measure(image, cal, grid, bias_model, memo, frozen)
     offset = _offset_mm(frame_dir)
     dT = float(np.random.default_rng(seeds[3]).uniform(-DELTA_T_K, DELTA_T_K)) \

@@ -420,9 +420,9 @@ THREAD_ENV = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 def limit_native_threads(threads: int) -> None:
     """Cap the native thread pools (BLAS, LAPACK, OpenMP, Dr.Jit's) of this process at
-    ``threads``: a pool worker's share of the cores.  Uncapped, each of ``w`` workers runs OpenBLAS with one
-    thread per core, whose threads spin after every call: on 2 cores they took a quarter of a
-    Monte Carlo trial's CPU and saved no wall time (BENCHMARKS.md).  Libraries loaded later
+    ``threads``: a pool worker's share of the cores.  Uncapped, each of ``w`` workers runs
+    OpenBLAS with one thread per core, whose threads spin after every call: on 2 cores they
+    took a quarter of a Monte Carlo trial's CPU and saved no wall time (BENCHMARKS.md).  Libraries loaded later
     read the environment; those already loaded (numpy's and scipy's OpenBLAS, loaded here)
     are capped through :mod:`threadpoolctl`, Dr.Jit's LLVM thread pool through
     ``drjit.set_thread_count`` (a twin-rendering trial: 0.71 -> 0.63 s of CPU with one

@@ -336,8 +336,8 @@ def sensor_image(rig: Rig, res: RenderResult, *, noise: str = "none", seed: int 
         lit = laser > 0
         on = np.flatnonzero(laser != 0)
         held = np.flatnonzero(flat)
-    if read is not None:
-        read = np.asarray(read, np.int64).reshape(-1)
+    if read is not None:  # checked here: the speckle step reads it before the sensor does
+        read = sensor_mod._flat_index(read, laser.shape, "read")
     if 2 * held.size > flat.size and read is None:
         held = None
         radiance = flat.astype(np.float64)
