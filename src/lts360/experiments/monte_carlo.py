@@ -125,8 +125,8 @@ from lts360.experiments.mc_measure import (
     _calibration,
     _compensate,
     _grid,
+    _noise_free_image,
     _nominal_calibration,
-    _placement,
     _plan,
     _read,
     _uncompensated,
@@ -235,15 +235,9 @@ def _nominal_radii(frame_dir: str, cal_path: str, renders: str, rig_name: str,
                    bias_model: str = "none") -> dict:
     """Per-view radii of a placement without noise or speckle (the speckle run's reference;
     before any twin correction, as the speckle run's own radii)."""
-    from types import SimpleNamespace
-
     from lts360.recon.triangulation.inverse import inverse_triangulate
-    from lts360.scenes.rig_io import load_rig
-    from lts360.simulator.frame import sensor_image
 
-    Y, L, _ = _placement(frame_dir)
-    img, _, _ = sensor_image(load_rig(rig_name), SimpleNamespace(radiance_W_m2_sr=Y,
-                                                                  laser_W_m2_sr=L), noise="none")
+    img = _noise_free_image(frame_dir, rig_name)
     cal = (_nominal_calibration(cal_path, renders, rig_name, theta_step_deg, placement_mm,
                                 master, bias_model) if compensate else _uncompensated(cal_path))
     res = inverse_triangulate(img, cal, _grid(theta_step_deg, placement_mm),
