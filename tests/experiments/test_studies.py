@@ -335,3 +335,31 @@ def test_a_gauge_study_names_what_its_column_measured():
            "n_measurements": 10, "mean_coverage_deg": 360.0}
     text = format_gauge_table(dict(row, ours="", ours_label="no compensation + twin"))
     assert "(lts360: no compensation + twin)" in text
+
+
+def test_a_study_refuses_a_calibration_of_another_rig(tmp_path, truth_calibration):
+    """A calibration records the rig it was made with; a study that would render with another
+    (the f/8 lens against the paper rig's f/2.8) refuses it in one line before rendering — it
+    ran before, silently measuring f/2.8 images with an f/8 twin.  The same rig under another
+    name (a lab's copy of the TOML) and a calibration without a record pass."""
+    import dataclasses
+
+    from lts360.experiments.gauge_study import check_calibration_rig
+    from lts360.experiments.monte_carlo import run_monte_carlo_study
+    from lts360.recon.model import load_calibration, save_calibration
+    from lts360.scenes.rig_io import load_rig, rig_to_toml
+
+    f8 = tmp_path / "f8.json"
+    cal = load_calibration(truth_calibration)
+    save_calibration(f8, dataclasses.replace(cal, optics={
+        "rig": "paper-f8", "rig_toml": rig_to_toml(load_rig("paper-f8"))}))
+    with pytest.raises(ValueError, match="not the rig the calibration .* made with .'paper-f8'"):
+        run_monte_carlo_study(tmp_path / "mc", calibration=f8, rig="paper", trials=2)
+    assert not (tmp_path / "mc" / "renders").exists()
+    copy = tmp_path / "lab.toml"
+    copy.write_text(rig_to_toml(load_rig("paper-f8")).replace('"paper-f8"', '"lab"'))
+    check_calibration_rig(f8, str(copy))
+    check_calibration_rig(f8, "paper-f8")
+    none = tmp_path / "none.json"
+    save_calibration(none, dataclasses.replace(cal, optics={}))
+    check_calibration_rig(none, "paper")

@@ -450,6 +450,30 @@ def _compensated_calibration(cal_path: Path, out: Path, *, rig: str, noise: str,
     return path
 
 
+def check_calibration_rig(calibration, rig: str) -> None:
+    """Refuse, in one line, a calibration made with another rig than the one a study renders
+    with (``rig``: a preset name or a TOML file): its camera, mirrors and optics would then not
+    be the images'.  The rig the calibration records (``optics.rig_toml``) is compared with
+    ``rig`` as TOML, names aside; a calibration without a record is taken as it is."""
+    from lts360.recon.model import load_calibration
+    from lts360.scenes.rig_io import load_rig, rig_to_toml
+    from lts360.twin.rig import recorded_rig
+
+    cal = load_calibration(calibration)
+    made = recorded_rig(cal)
+    if made is None:
+        return
+
+    def body(r) -> str:
+        return "\n".join(line for line in rig_to_toml(r).splitlines()
+                         if not line.startswith("name ="))
+
+    if body(made) != body(load_rig(rig)):
+        raise ValueError(f"--rig {rig!r} is not the rig the calibration {str(calibration)!r} "
+                         f"was made with ({cal.optics.get('rig', made.name)!r}): the study "
+                         f"renders with --rig; pass that rig")
+
+
 def ensure_calibration(out: Path, calibration=None, *, rig: str = "paper", noise: str = "realistic",
                        seed: int = 0, spp: int = 16, compensate: bool = True,
                        calibrate_options: dict | None = None, compensation_shots: int = 1,
@@ -470,6 +494,7 @@ def ensure_calibration(out: Path, calibration=None, *, rig: str = "paper", noise
             run_calibrate(cal_dir, rig_name=rig, noise=noise, seed=seed, say=say,
                           **(calibrate_options or {}))
     calibration = Path(calibration)
+    check_calibration_rig(calibration, rig)
     if compensate:
         calibration = _compensated_calibration(calibration, out, rig=rig, noise=noise, spp=spp,
                                                seed=seed, shots=compensation_shots,

@@ -118,6 +118,7 @@ from lts360.experiments.gauge_study import (
     STEPS,
     _config_label,
     _step_key,
+    check_calibration_rig,
     gauge_placements,
 )
 from lts360.experiments.mc_measure import (
@@ -493,6 +494,7 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
     out.mkdir(parents=True, exist_ok=True)
     if not 0 <= placement_mm <= 10:
         raise ValueError(f"placement_mm must be in [0, 10], got {placement_mm}")
+    check_calibration_rig(calibration, rig)
     if bias_model == "twin":  # refused in one line, before any render, without its optics
         from lts360.recon.model import load_calibration
         from lts360.twin.rig import twin_design
