@@ -36,6 +36,7 @@ def run(*args):
     (("study", "plug-gauge", "--out", "s", "--placement-mm", "-1"), "--placement-mm"),
     (("study", "monte-carlo", "--out", "s", "--master", "--no-compensate"), "--master"),
     (("study", "monte-carlo", "--out", "s", "--placement-mm", "11"), "--placement-mm"),
+    (("study", "monte-carlo", "--out", "s", "--spp", "0"), "--spp"),
     (("measure", "f", "--calibration", "c.json", "--out", "c.ply", "--reject", "maybe"),
      "--reject"),
     (("study", "examples", "--out", "s", "--objects", "teapot"), "teapot"),

@@ -89,6 +89,8 @@ def cmd_study_monte_carlo(args) -> int:
         raise UsageError("--batch and --sensitivity-trials must be >= 2")
     if not 1 <= args.placements <= 100:
         raise UsageError(f"--placements: must be in [1, 100], got {args.placements}")
+    if not 1 <= args.spp <= MAX_SPP:
+        raise UsageError(f"--spp: must be in [1, {MAX_SPP}], got {args.spp}")
     if not 1 <= args.digits <= 4:
         raise UsageError(f"--digits: must be in [1, 4], got {args.digits}")
     _check_shots(args.compensation_shots)
@@ -115,7 +117,7 @@ def cmd_study_monte_carlo(args) -> int:
                                     batch=args.batch, n_dig=args.digits,
                                     sensitivity_trials=args.sensitivity_trials,
                                     placements=args.placements, placement_mm=args.placement_mm,
-                                    workers=args.workers, **common)
+                                    spp=args.spp, workers=args.workers, **common)
     print(format_mc(summary))
     print(f"wrote {out}/ (summary.json, monte-carlo.png, mc/batch_*/results.nc)")
     return 0
