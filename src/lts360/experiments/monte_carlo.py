@@ -32,15 +32,16 @@ Render once, perturb many: each placement is rendered once (noise-free radiance,
 stored radiance, draws a calibration and reconstructs — nothing is re-rendered.  A stored
 render's own noise is the same in every trial, so it is a bias of the study, not a spread:
 at 16 spp the reference placement's render noise moved the nominal §4.4 offsets by 1.4–3.4 µm
-(sd over render seeds, the true calibration) and the compensated radius by −2.3 µm on average
-(−11.0 µm against −8.7 µm at 1024 spp); at 256 spp 0.6–0.8 µm and −8.4 µm (STUDIES.md).
+(sd over render seeds; the true calibration, one placement), and one converged image measured
+with that compensation read −10.3 … −11.5 µm against −8.7 / −8.9 µm with a 1024-spp
+reference: a bias, not only a scatter; at 256 spp 0.6–0.8 µm and −8.0 … −8.8 µm (STUDIES.md).
 
 Two procedures: a fixed number of trials M, or the adaptive procedure of JCGM 101 §7.9 —
 batches of ``batch`` trials until twice the standard deviations of the batch means of the
 mean, the standard uncertainty and both ends of the 95 % coverage interval are all below the
 numerical tolerance δ (§7.9.2: δ = ½·10^l for u(y) written with ``n_dig`` significant digits).
 The coverage interval is the probabilistically symmetric one (§7.7).  JCGM 101 (and DESIGN.md)
-take batches of max(J, 10⁴) with J = ⌈100/(1−p)⌉; one trial here costs ~0.9 s of CPU (two
+take batches of max(J, 10⁴) with J = ⌈100/(1−p)⌉; one trial here costs ~0.6 s of CPU (two
 reconstructions and two twin renders, not a formula), so a batch of 10⁴ would take over an
 hour on two cores — the default batch is 100 trials (``--batch``), the stopping rule
 unchanged.
