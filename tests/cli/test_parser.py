@@ -66,3 +66,17 @@ def test_no_cli_function_is_longer_than_120_lines():
                 if n > 120:
                     long.append(f"{f.name}:{node.lineno} {node.name} ({n} lines)")
     assert not long, long
+
+
+def test_the_command_line_starts_without_the_studies_heavy_modules():
+    """Building the parser (every ``lts360 ... --help``) imports no study, no xarray and no
+    Mitsuba: a default the parser shows is written there, not imported from its study."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from lts360.cli import build_parser; build_parser(); "
+            "print(sorted(m for m in ('xarray', 'mitsuba', 'lts360.experiments.monte_carlo', "
+            "'lts360.experiments.gauge_study') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "[]", out

@@ -17,9 +17,14 @@ def test_the_placements_render_at_placement_spp_by_default():
 
     assert PLACEMENT_SPP == 256
     assert inspect.signature(run_monte_carlo_study).parameters["spp"].default == PLACEMENT_SPP
-    parse = build_parser().parse_args
-    assert parse(["study", "monte-carlo", "--out", "s"]).spp == PLACEMENT_SPP
-    assert parse(["study", "monte-carlo", "--out", "s", "--spp", "64"]).spp == 64
+    parser = build_parser()
+    # the command line says the default without importing the study (a fast --help)
+    assert parser.parse_args(["study", "monte-carlo", "--out", "s"]).spp is None
+    assert parser.parse_args(["study", "monte-carlo", "--out", "s", "--spp", "64"]).spp == 64
+    studies = next(a for a in parser._actions if a.dest == "command").choices["study"]
+    mc = next(a for a in studies._actions if a.dest == "study").choices["monte-carlo"]
+    spp = next(a for a in mc._actions if a.dest == "spp")
+    assert f"default {PLACEMENT_SPP}," in spp.help
 
 
 def test_the_monte_carlo_refuses_a_bad_spp_before_rendering(tmp_path):

@@ -15,7 +15,6 @@ from lts360.cli.studies import (
     cmd_study_plug_gauge,
 )
 from lts360.cli.usage import VARIANT_HELP, _Parser
-from lts360.experiments.monte_carlo import PLACEMENT_SPP
 from lts360.simulator.integrator import MAX_SCATTER
 from lts360.twin.debias import DEFAULT_TWIN_SPP
 
@@ -116,9 +115,10 @@ def _add_monte_carlo(studies) -> None:
     q.add_argument("--sensitivity-trials", type=int, default=50,
                    help="trials per input in the one-at-a-time runs")
     q.add_argument("--placements", type=int, default=8, help="rendered gauge placements")
-    q.add_argument("--spp", type=int, default=PLACEMENT_SPP,
-                   help=f"samples per pixel of the placements' renders (default {PLACEMENT_SPP}: "
-                   "their render noise is common to every trial, a bias of the study)")
+    q.add_argument("--spp", type=int, default=None,
+                   help="samples per pixel of the placements' renders (default 256, the study's "
+                   "PLACEMENT_SPP: their render noise is common to every trial, a bias of the "
+                   "study)")
     q.add_argument("--no-compensate", action="store_true",
                    help="no §4.4 compensation (and so no master)")
     _add_master_twin_steps(q, master_default=None, what="draw",

@@ -80,7 +80,11 @@ def cmd_study_plug_gauge(args) -> int:
 
 def cmd_study_monte_carlo(args) -> int:
     from lts360.experiments.gauge_study import ensure_calibration
-    from lts360.experiments.monte_carlo import format_mc, run_monte_carlo_study
+    from lts360.experiments.monte_carlo import (
+        PLACEMENT_SPP,
+        format_mc,
+        run_monte_carlo_study,
+    )
 
     common = _study_common(args)
     if not 2 <= args.trials <= 10**6:
@@ -89,7 +93,7 @@ def cmd_study_monte_carlo(args) -> int:
         raise UsageError("--batch and --sensitivity-trials must be >= 2")
     if not 1 <= args.placements <= 100:
         raise UsageError(f"--placements: must be in [1, 100], got {args.placements}")
-    if not 1 <= args.spp <= MAX_SPP:
+    if args.spp is not None and not 1 <= args.spp <= MAX_SPP:
         raise UsageError(f"--spp: must be in [1, {MAX_SPP}], got {args.spp}")
     if not 1 <= args.digits <= 4:
         raise UsageError(f"--digits: must be in [1, 4], got {args.digits}")
@@ -117,7 +121,8 @@ def cmd_study_monte_carlo(args) -> int:
                                     batch=args.batch, n_dig=args.digits,
                                     sensitivity_trials=args.sensitivity_trials,
                                     placements=args.placements, placement_mm=args.placement_mm,
-                                    spp=args.spp, workers=args.workers, **common)
+                                    spp=PLACEMENT_SPP if args.spp is None else args.spp,
+                                    workers=args.workers, **common)
     print(format_mc(summary))
     print(f"wrote {out}/ (summary.json, monte-carlo.png, mc/batch_*/results.nc)")
     return 0
