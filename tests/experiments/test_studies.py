@@ -112,7 +112,7 @@ def test_plug_gauge_study_end_to_end(tmp_path, truth_calibration):
 
 @pytest.mark.slow
 def test_monte_carlo_study_end_to_end(tmp_path, truth_calibration):
-    from lts360.experiments.monte_carlo import INPUTS, run_monte_carlo_study
+    from lts360.experiments.monte_carlo import INPUTS, PLACEMENT_SPP, run_monte_carlo_study
 
     s = run_monte_carlo_study(tmp_path, calibration=truth_calibration, trials=4, batch=2,
                               sensitivity_trials=2, placements=2, workers=1, say=lambda *_: None)
@@ -124,6 +124,17 @@ def test_monte_carlo_study_end_to_end(tmp_path, truth_calibration):
                                   sensitivity_trials=2, placements=2, workers=1,
                                   say=lambda *_: None)
     assert again["mean_um"] == s["mean_um"]  # resumed from disk: same numbers
+    # each trial records the sample count of the renders it measured: trials of renders made
+    # at another count are another study, not resumed
+    plan = json.loads((tmp_path / "mc" / "batch_000" / "plan.json").read_text())
+    assert {t["params"]["spp"] for t in plan["trials"]} == {PLACEMENT_SPP}
+    import shutil
+
+    shutil.rmtree(tmp_path / "renders")
+    with pytest.raises(ValueError, match="different study"):
+        run_monte_carlo_study(tmp_path, calibration=truth_calibration, trials=4, batch=2,
+                              sensitivity_trials=2, placements=2, workers=1, spp=4,
+                              say=lambda *_: None)
 
 
 def test_monte_carlo_compensates_nominal_and_drawn_calibrations_alike(tmp_path,

@@ -531,6 +531,8 @@ def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive:
             "placement_mm": float(placement_mm),
             "compensate": bool(compensate), "compensation_shots": int(compensation_shots)}
     # only when on: the trials of earlier studies (§4.4 alone) keep their parameters
+    if int(spp) != 16:  # a trial says which renders it measured (16 spp: the studies before
+        base["spp"] = int(spp)  # c2d20ad, whose trials do not record it)
     if master and compensate:
         base["master"] = True
     if bias_model == "twin":
