@@ -9,13 +9,14 @@ section, rendered noise-free and measured as the image was, minus the section it
 (:class:`lts360.twin.TwinCorrector`).  ``twin_per="trial"`` renders it for every trial, from
 the trial's noisy section, with the trial's drawn calibration — what a user's measurement
 does, and about 0.3 s of a trial's 0.63 s of CPU (two corrections: the image and the
-master's reference shot, each rendered on ~12 700 pixels at 64 spp).  ``twin_per="placement"`` computes each placement's correction once per
-process, from its noise-free image measured with the nominal calibration, and subtracts it
-from every trial of that placement (per view and ray of the grid; a point the frozen
-correction does not cover stays uncorrected, as the twin leaves one).  What that leaves out
-is how the correction moves with the trial's draw — its calibration, noise and speckle —
-which the paired benchmark measures (``benchmarks/bench_mc_twin.py``, BENCHMARKS.md): a
-small fraction of u(y), and a trial costs a quarter.
+master's reference shot, each rendered on ~12 700 pixels at 64 spp).
+``twin_per="placement"`` computes each placement's correction once per process, from its
+noise-free image measured with the nominal calibration, and subtracts it from every trial of
+that placement (per view and ray of the grid; a point the frozen correction does not cover
+stays uncorrected, as the twin leaves one).  What that leaves out is how the correction moves
+with the trial's draw — its calibration, noise and speckle — which the paired benchmark
+measures (``benchmarks/bench_mc_twin.py``, BENCHMARKS.md): a small fraction of u(y), and a
+trial costs a quarter.
 
 A trial's two noisy images (its own and the reference shot) get their speckle and sensor noise
 on the pixels the trial's plan reads alone (:func:`read_set`, ~1 % of the frame; the others

@@ -478,7 +478,8 @@ def _run_all_batches(out: Path, base: dict, kw: dict, *, trials: int, batch: int
 
 def run_monte_carlo_study(out_dir, *, calibration, trials: int = 1000, adaptive: bool = False,
                           batch: int = 100, n_dig: int = 2, sensitivity_trials: int = 50,
-                          placements: int = 8, seed: int = 0, rig: str = "paper", spp: int = PLACEMENT_SPP,
+                          placements: int = 8, seed: int = 0, rig: str = "paper",
+                          spp: int = PLACEMENT_SPP,
                           theta_step_deg: float = 0.5, workers: int | None = None,
                           dask_address: str | None = None, compensate: bool = True,
                           compensation_shots: int = 1, master: bool = True,
